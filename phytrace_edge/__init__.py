@@ -1,0 +1,16 @@
+"""phytrace-edge: the PhyTrace edge telemetry bridge.
+
+ROS 2 topics -> ingest (pure handlers) -> build (one UDM event per sample tick) ->
+queue (durable SQLite WAL) -> ship (batched HTTP to PhyCloud).
+"""
+
+from typing import Any
+
+__version__ = "0.1.0"
+
+
+def run_simulation(num_ticks: int = 100, **kwargs: Any) -> dict[str, Any]:
+    """Run the simulated delivery robot through the bridge; see ``phytrace_edge.sim``."""
+    from phytrace_edge.sim.runner import run_simulation as run
+
+    return run(num_ticks, **kwargs)
