@@ -1,0 +1,28 @@
+"""Event ids and timestamps of the UDM."""
+
+from __future__ import annotations
+
+import os
+import time
+import uuid
+from datetime import datetime, timezone
+
+
+def new_event_id(unix_ms: int | None = None) -> str:
+    """A UUIDv7 (RFC 9562): unique, and sortable by creation time to the millisecond.
+
+    Time-ordered ids keep PhyCloud's index inserts local and let an operator read the
+    order of events from their ids. The stdlib has ``uuid.uuid7`` only from 3.14.
+    """
+    ms = time.time_ns() // 1_000_000 if unix_ms is None else unix_ms
+    value = (ms & (2**48 - 1)) << 80 | int.from_bytes(os.urandom(10), "big")
+    value = value & ~(0xF << 76) | 0x7 << 76  # version 7
+    value = value & ~(0x3 << 62) | 0x2 << 62  # RFC 4122 variant
+    return str(uuid.UUID(int=value))
+
+
+def format_timestamp(unix_s: float) -> str:
+    """UTC ISO-8601 with milliseconds and ``Z``: ``2025-01-15T14:23:01.042Z``."""
+    ms = round(unix_s * 1000)
+    moment = datetime.fromtimestamp(ms // 1000, tz=timezone.utc)
+    return f"{moment:%Y-%m-%dT%H:%M:%S}.{ms % 1000:03d}Z"

@@ -1,0 +1,74 @@
+"""The UDM 1.0.0 JSON Schema shipped in the package, and its validator.
+
+The schema file is the contract PhyCloud and other languages use; this module compiles
+it once (fastjsonschema generates Python code from it) and reports the first failure
+of an event as the field path and the offending value.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import resources
+from typing import Any
+
+import fastjsonschema
+
+SCHEMA_VERSION = "1.0.0"
+SCHEMA_FILE = f"udm-{SCHEMA_VERSION}.schema.json"
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SchemaViolation:
+    """The first place an event breaks the schema."""
+
+    path: str
+    value: Any
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.message} (value: {self.value!r:.120})"
+
+
+def load_schema() -> dict[str, Any]:
+    """The UDM JSON Schema as a dict."""
+    text = resources.files("phytrace_edge.udm").joinpath(SCHEMA_FILE).read_text("utf-8")
+    schema: dict[str, Any] = json.loads(text)
+    return schema
+
+
+@functools.cache
+def _compiled() -> Callable[[Any], Any]:
+    return fastjsonschema.compile(load_schema())
+
+
+def find_violation(event: Any) -> SchemaViolation | None:
+    """The first schema violation of ``event``, or None when it is valid."""
+    try:
+        _compiled()(event)
+    except fastjsonschema.JsonSchemaValueException as exc:
+        path = "/".join(str(part) for part in exc.path[1:]) or "(event)"
+        return SchemaViolation("/" + path if path != "(event)" else path, exc.value, exc.message)
+    return None
+
+
+def check_event(event: Any, logger: logging.Logger = log) -> bool:
+    """Validate ``event``; log a WARNING with the field path and value when it fails."""
+    violation = find_violation(event)
+    if violation is None:
+        return True
+    logger.warning(
+        "UDM validation failed for event %s: %s",
+        _event_id(event),
+        violation,
+    )
+    return False
+
+
+def _event_id(event: Any) -> str:
+    return str(event.get("event_id", "?")) if isinstance(event, dict) else "?"
