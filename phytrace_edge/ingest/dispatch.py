@@ -1,0 +1,65 @@
+"""The one place handlers are called: message in, reading to the builder, rejects counted.
+
+Every source (rclpy, DDS, bag replay, simulator) calls ``Dispatcher.on_message`` for
+each message. A message a handler rejects is counted by (topic, reason) and logged at
+WARNING at most once a minute per pair, so a topic that publishes garbage at 100 Hz
+cannot flood the log; it never stops the other topics.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+from phytrace_edge.errors import MalformedMessage
+from phytrace_edge.ingest.topics import TOPIC_BY_NAME
+
+log = logging.getLogger(__name__)
+
+LOG_EVERY_S = 60.0
+Reading = dict[str, Any]
+
+
+class Dispatcher:
+    """Routes a message to its topic's handler and the reading to ``on_reading``."""
+
+    def __init__(self, on_reading: Callable[[str, Reading], None]) -> None:
+        self._on_reading = on_reading
+        self._lock = threading.Lock()
+        self._last_logged: dict[tuple[str, str], float] = {}
+        self.received: Counter[str] = Counter()
+        self.rejected: Counter[tuple[str, str]] = Counter()
+
+    def on_message(self, topic: str, msg: Any) -> None:
+        """Handle one message of canonical ``topic``; never raises."""
+        with self._lock:
+            self.received[topic] += 1
+        try:
+            reading = TOPIC_BY_NAME[topic].handler(msg)
+        except MalformedMessage as exc:
+            self._reject(topic, exc.reason, exc.detail)
+            return
+        except Exception as exc:  # a handler bug must not stop ingest of other topics
+            self._reject(topic, "handler_error", f"{type(exc).__name__}: {exc}")
+            return
+        for field in reading.pop("rejected_fields", ()):
+            self._reject(topic, f"bad_field:{field}", f"field {field!r} has a wrong type")
+        self._on_reading(topic, reading)
+
+    def _reject(self, topic: str, reason: str, detail: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            self.rejected[(topic, reason)] += 1
+            count = self.rejected[(topic, reason)]
+            last = self._last_logged.get((topic, reason))
+            should_log = last is None or now - last >= LOG_EVERY_S
+            if should_log:
+                self._last_logged[(topic, reason)] = now
+        if should_log:
+            log.warning(
+                "%s: message rejected (%s, %d so far): %.200s", topic, reason, count, detail
+            )

@@ -1,0 +1,77 @@
+"""The topic table: the ten ROS 2 topics of the reference guide and how each is read.
+
+Two flags say how a topic's messages are treated:
+
+- ``every_message``: each message matters (diagnostics, goals, delivery status), so
+  what arrives between two sample ticks is accumulated by the builder and a source
+  must never thin these topics out. Other topics are state streams (odometry, IMU,
+  ...) where only the latest value counts.
+- ``latched``: the topic publishes on change (a goal, a delivery state), so its latest
+  value stays current without a staleness bound. Every other topic goes stale after
+  ``STALE_AFTER_S`` and then leaves the event.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from phytrace_edge.ingest import handlers
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One row of the topic table."""
+
+    name: str
+    type_name: str
+    handler: Callable[[Any], dict[str, Any]]
+    domains: tuple[str, ...]
+    every_message: bool = False
+    latched: bool = False
+
+
+TOPICS: tuple[TopicSpec, ...] = (
+    TopicSpec("/odom", "nav_msgs/msg/Odometry", handlers.handle_odometry, ("location", "motion")),
+    TopicSpec(
+        "/battery_state", "sensor_msgs/msg/BatteryState", handlers.handle_battery_state, ("power",)
+    ),
+    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", handlers.handle_laser_scan, ("perception",)),
+    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", handlers.handle_imu, ("perception", "motion")),
+    TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", handlers.handle_twist, ("motion",)),
+    TopicSpec(
+        "/gps/fix",
+        "sensor_msgs/msg/NavSatFix",
+        handlers.handle_nav_sat_fix,
+        ("location", "perception"),
+    ),
+    TopicSpec(
+        "/diagnostics",
+        "diagnostic_msgs/msg/DiagnosticArray",
+        handlers.handle_diagnostic_array,
+        ("operational",),
+        every_message=True,
+    ),
+    TopicSpec(
+        "/goal_pose",
+        "geometry_msgs/msg/PoseStamped",
+        handlers.handle_pose_stamped,
+        ("navigation",),
+        every_message=True,
+        latched=True,
+    ),
+    TopicSpec(
+        "/joint_states", "sensor_msgs/msg/JointState", handlers.handle_joint_state, ("actuators",)
+    ),
+    TopicSpec(
+        "/delivery/status",
+        "std_msgs/msg/String",
+        handlers.handle_delivery_status,
+        ("operational", "payload"),
+        every_message=True,
+        latched=True,
+    ),
+)
+
+TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
