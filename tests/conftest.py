@@ -1,0 +1,55 @@
+"""Shared fixtures."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+from typing import Any
+
+import pytest
+
+from tests.flavours import FLAVOURS
+
+HAVE_ROSBAGS = importlib.util.find_spec("rosbags") is not None
+
+
+@pytest.fixture(params=FLAVOURS)
+def flavour(request: pytest.FixtureRequest) -> str:
+    """Each handler test runs for rclpy, rosbags and DDS-like field types."""
+    if request.param == "rosbags" and not HAVE_ROSBAGS:
+        pytest.skip("rosbags is not installed (pip install .[bag])")
+    return str(request.param)
+
+
+class FakeClock:
+    """A builder clock the test moves by hand."""
+
+    def __init__(self, wall: float = 1_763_000_000.0) -> None:
+        self.mono = 1000.0
+        self.wall_s = wall
+
+    def monotonic(self) -> float:
+        return self.mono
+
+    def wall(self) -> float:
+        return self.wall_s
+
+    def advance(self, seconds: float) -> None:
+        self.mono += seconds
+        self.wall_s += seconds
+
+
+@pytest.fixture
+def clock() -> FakeClock:
+    return FakeClock()
+
+
+def non_finite_values(value: Any, path: str = "") -> list[str]:
+    """Paths of every NaN, inf or None anywhere in ``value``."""
+    if isinstance(value, dict):
+        return [p for k, v in value.items() for p in non_finite_values(v, f"{path}/{k}")]
+    if isinstance(value, list):
+        return [p for i, v in enumerate(value) for p in non_finite_values(v, f"{path}/{i}")]
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return [path]
+    return []

@@ -1,0 +1,70 @@
+"""One message, three field-type conventions: rclpy (the mock), rosbags, and DDS-like.
+
+Tests build a message once with the mock classes (rclpy's types: ``bytes`` levels,
+``array.array`` sequences, numpy fixed arrays) and convert it:
+
+- ``rosbags``: the real rosbags Jazzy type store classes (ints for bytes and uint8,
+  numpy arrays for every numeric array).
+- ``dds``: plain objects with Python lists and ints, as Cyclone DDS IDL samples carry.
+"""
+
+from __future__ import annotations
+
+import array
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from phytrace_edge.sim.mock_ros.messages import Message
+
+FLAVOURS = ("rclpy", "rosbags", "dds")
+
+
+def _rosbags_store() -> Any:
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+_STORE: Any = None
+
+
+def to_rosbags(msg: Message) -> Any:
+    global _STORE
+    if _STORE is None:
+        _STORE = _rosbags_store()
+    cls = _STORE.types[msg._type]
+    return cls(**{name: _rosbags_value(getattr(msg, name)) for name in msg._fields_and_field_types})
+
+
+def _rosbags_value(value: Any) -> Any:
+    if isinstance(value, Message):
+        return to_rosbags(value)
+    if isinstance(value, bytes):
+        return value[0]
+    if isinstance(value, array.array):
+        return np.array(value, dtype=np.float32 if value.typecode == "f" else np.float64)
+    if isinstance(value, list):
+        return [_rosbags_value(item) for item in value]
+    return value
+
+
+def to_dds(msg: Any) -> Any:
+    if isinstance(msg, Message):
+        return SimpleNamespace(**{n: to_dds(getattr(msg, n)) for n in msg._fields_and_field_types})
+    if isinstance(msg, bytes):
+        return msg[0]
+    if isinstance(msg, (array.array, np.ndarray)):
+        return [float(v) for v in msg]
+    if isinstance(msg, list):
+        return [to_dds(item) for item in msg]
+    return msg
+
+
+def as_flavour(msg: Message, flavour: str) -> Any:
+    if flavour == "rclpy":
+        return msg
+    if flavour == "rosbags":
+        return to_rosbags(msg)
+    return to_dds(msg)

@@ -1,0 +1,211 @@
+"""Settings: sources and precedence, the reference guide's names, validation messages."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from phytrace_edge.cli import main
+from phytrace_edge.config import GIB, MIB, ConfigError, Secret, load_settings, setting_infos
+
+
+def test_defaults_match_the_reference_guide() -> None:
+    s = load_settings(env={"HOME": "/home/op"}).settings
+    assert s.phycloud_endpoint == "http://localhost:8000/api/v1"
+    assert s.phycloud_api_key == Secret("")
+    assert (s.source_id, s.source_type) == ("delivery-robot-001", "delivery_robot")
+    assert (s.fleet_id, s.site_id) == (None, None)
+    assert (s.sample_rate_hz, s.batch_size) == (5.0, 10)
+    assert s.queue_max_bytes == GIB and s.queue_ttl_s == 604800
+    assert s.queue_path == "/home/op/.local/state/phytrace-edge/queue.db"
+
+
+def test_reference_env_file_is_read_exactly() -> None:
+    env = {
+        "PHYCLOUD_ENDPOINT": "https://api.phycloud.phyware.io/v1",
+        "PHYCLOUD_API_KEY": "phk_live_xxxxxxxxxxxxxxxx",
+        "SOURCE_ID": "warehouse-amr-07",
+        "SOURCE_TYPE": "amr",
+        "FLEET_ID": "chicago-dc-fleet",
+        "SITE_ID": "chicago-dc-01",
+        "SAMPLE_RATE_HZ": "10.0",
+        "BATCH_SIZE": "20",
+    }
+    loaded = load_settings(env=env)
+    s = loaded.settings
+    assert s.phycloud_endpoint == "https://api.phycloud.phyware.io/v1"
+    assert s.phycloud_api_key.reveal() == "phk_live_xxxxxxxxxxxxxxxx"
+    assert (s.source_id, s.source_type, s.fleet_id, s.site_id) == (
+        "warehouse-amr-07",
+        "amr",
+        "chicago-dc-fleet",
+        "chicago-dc-01",
+    )
+    assert (s.sample_rate_hz, s.batch_size) == (10.0, 20)
+    assert loaded.origins["source_id"] == "env SOURCE_ID"
+
+
+def test_robot_aliases_and_primary_name_wins() -> None:
+    s = load_settings(env={"ROBOT_ID": "r-9", "ROBOT_TYPE": "agv"}).settings
+    assert (s.source_id, s.source_type) == ("r-9", "agv")
+    s = load_settings(env={"ROBOT_ID": "r-9", "SOURCE_ID": "s-1"}).settings
+    assert s.source_id == "s-1"
+
+
+def test_precedence_flag_env_file_ros_default() -> None:
+    loaded = load_settings(
+        flags={"batch_size": "4"},
+        env={"BATCH_SIZE": "3", "SAMPLE_RATE_HZ": "2"},
+        config_file={"batch_size": 2, "sample_rate_hz": 1.5, "site_id": "file-site"},
+        ros_params={
+            "batch_size": 1,
+            "sample_rate_hz": 1.0,
+            "site_id": "ros-site",
+            "fleet_id": "ros-fleet",
+        },
+    )
+    s = loaded.settings
+    assert (s.batch_size, s.sample_rate_hz, s.site_id, s.fleet_id) == (
+        4,
+        2.0,
+        "file-site",
+        "ros-fleet",
+    )
+    assert loaded.origins["batch_size"] == "flag --batch-size"
+    assert loaded.origins["sample_rate_hz"] == "env SAMPLE_RATE_HZ"
+    assert loaded.origins["site_id"] == "file"
+    assert loaded.origins["fleet_id"] == "ros param"
+    assert loaded.origins["http_timeout_s"] == "default"
+
+
+def test_empty_env_values_count_as_unset() -> None:
+    assert load_settings(env={"FLEET_ID": "", "SOURCE_ID": " "}).settings.source_id == (
+        "delivery-robot-001"
+    )
+
+
+@pytest.mark.parametrize(
+    ("env", "message"),
+    [
+        (
+            {"SOURCE_TYPE": "boat"},
+            "SOURCE_TYPE='boat': must be one of delivery_robot, amr, agv, drone, humanoid, arm",
+        ),
+        ({"SAMPLE_RATE_HZ": "-1"}, "SAMPLE_RATE_HZ='-1': must be a number > 0 and <= 1000"),
+        ({"SAMPLE_RATE_HZ": "nan"}, "SAMPLE_RATE_HZ='nan': must be a number > 0"),
+        ({"PHYCLOUD_ENDPOINT": "api.example.com"}, "PHYCLOUD_ENDPOINT='api.example.com': must be"),
+        ({"BATCH_SIZE": "ten"}, "BATCH_SIZE='ten': must be a whole number from 1 to 10000"),
+        ({"QUEUE_MAX_BYTES": "12 potatoes"}, "QUEUE_MAX_BYTES='12 potatoes': must be a size"),
+        ({"QUEUE_ON_FULL": "panic"}, "QUEUE_ON_FULL='panic': must be one of drop_oldest"),
+        ({"BRIDGE_INPUT": "bag:"}, "BRIDGE_INPUT='bag:': must be ros, dds, sim or bag:PATH"),
+        ({"TOPIC_REMAP": "/nope=/x"}, "TOPIC_REMAP='/nope=/x': must be topic=name pairs"),
+        ({"TOPICS_DISABLED": "/scan,/laser"}, "TOPICS_DISABLED='/scan,/laser': must be known"),
+        ({"METRICS_PORT": "70000"}, "METRICS_PORT='70000': must be a whole number from 0"),
+        ({"RETRY_MIN_S": "10", "RETRY_MAX_S": "5"}, "RETRY_MAX_S=5: must be >= RETRY_MIN_S (10)"),
+        ({"ROBOT_TYPE": "boat"}, "ROBOT_TYPE='boat': must be one of"),
+        ({"CA_BUNDLE": "/no/such/ca.pem"}, "CA_BUNDLE='/no/such/ca.pem': must be the path of"),
+    ],
+)
+def test_bad_values_name_setting_value_and_rule(env: dict, message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        load_settings(env=env)
+    assert str(info.value).startswith(message)
+    assert "\n" not in str(info.value)
+
+
+def test_api_key_never_shows_in_repr_or_str() -> None:
+    settings = load_settings(env={"PHYCLOUD_API_KEY": "phk_live_secret"}).settings
+    assert "phk_live_secret" not in repr(settings)
+    assert "phk_live_secret" not in repr(Secret("phk_live_secret"))
+    assert "phk_live_secret" not in str(Secret("phk_live_secret"))
+
+
+def test_sizes_parse_with_units() -> None:
+    s = load_settings(env={"QUEUE_MAX_BYTES": "512MiB", "BATCH_MAX_BYTES": "2048"}).settings
+    assert (s.queue_max_bytes, s.batch_max_bytes) == (512 * MIB, 2048)
+    assert load_settings(env={"QUEUE_MAX_BYTES": "1.5GB"}).settings.queue_max_bytes == 1_500_000_000
+
+
+def test_topic_remap_and_disable_shape_the_topic_set() -> None:
+    s = load_settings(
+        env={"TOPIC_REMAP": "/odom=/wheel/odom, /scan=/front/scan", "TOPICS_DISABLED": "/gps/fix"}
+    ).settings
+    assert s.topics["/odom"] == "/wheel/odom"
+    assert s.topics["/scan"] == "/front/scan"
+    assert "/gps/fix" not in s.topics
+    assert len(s.topics) == 9
+
+
+def test_state_dir_follows_systemd_then_container_then_xdg() -> None:
+    def path(env: dict) -> str | None:
+        return load_settings(env=env).settings.queue_path
+
+    assert path({"STATE_DIRECTORY": "/var/lib/phytrace-edge:/other"}) == (
+        "/var/lib/phytrace-edge/queue.db"
+    )
+    assert path({"PHYTRACE_STATE_DIR": "/data"}) == "/data/queue.db"
+    assert path({"XDG_STATE_HOME": "/x"}) == "/x/phytrace-edge/queue.db"
+    assert path({"QUEUE_PATH": "/q/queue.db", "STATE_DIRECTORY": "/s"}) == "/q/queue.db"
+
+
+def test_config_file_unknown_key_and_bad_toml(tmp_path: Path) -> None:
+    from phytrace_edge.config import read_config_file
+
+    good = tmp_path / "good.toml"
+    good.write_text('source_id = "from-file"\nsample_rate_hz = 2.5\n')
+    assert load_settings(config_file=read_config_file(str(good))).settings.sample_rate_hz == 2.5
+    with pytest.raises(ConfigError, match="unknown setting 'sample_rate'"):
+        load_settings(config_file={"sample_rate": 2})
+    bad = tmp_path / "bad.toml"
+    bad.write_text("source_id = \n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        read_config_file(str(bad))
+    with pytest.raises(ConfigError, match="not found"):
+        read_config_file(str(tmp_path / "missing.toml"))
+
+
+def test_every_setting_has_a_doc_line_and_is_in_the_configuration_doc() -> None:
+    doc = (Path(__file__).parents[2] / "docs" / "configuration.md").read_text()
+    for info in setting_infos():
+        assert info.doc
+        assert f"`{info.env}`" in doc, f"{info.env} is missing from docs/configuration.md"
+
+
+def test_config_command_shows_sources_and_redacts_key(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PHYCLOUD_API_KEY", "phk_live_secret")
+    monkeypatch.setenv("SOURCE_ID", "bot-7")
+    assert main(["config", "--batch-size", "25"]) == 0
+    out = capsys.readouterr().out
+    assert "phk_live_secret" not in out
+    lines = {line.split()[0]: line.split() for line in out.splitlines()}
+    assert lines["PHYCLOUD_API_KEY"][1] == "***"
+    assert lines["SOURCE_ID"][1:] == ["bot-7", "env", "SOURCE_ID"]
+    assert lines["BATCH_SIZE"][1:] == ["25", "flag", "--batch-size"]
+
+
+@pytest.mark.parametrize(
+    ("env", "setting"),
+    [
+        ({"SOURCE_TYPE": "boat"}, "SOURCE_TYPE"),
+        ({"SAMPLE_RATE_HZ": "-2"}, "SAMPLE_RATE_HZ"),
+        ({"PHYCLOUD_ENDPOINT": "not a url"}, "PHYCLOUD_ENDPOINT"),
+    ],
+)
+def test_config_command_bad_value_is_one_line_no_traceback(env: dict, setting: str) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "config"],
+        env={**env, "PATH": "/usr/bin:/bin", "HOME": "/tmp"},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert result.stdout == ""
+    assert result.stderr.count("\n") == 1
+    assert result.stderr.startswith(f"phytrace-edge: error: {setting}=")
+    assert "Traceback" not in result.stderr

@@ -1,0 +1,111 @@
+"""The shipped UDM schema: the reference example validates; violations name path and value."""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+from pathlib import Path
+
+import pytest
+
+from phytrace_edge.udm import check_event, find_violation, load_schema
+from phytrace_edge.udm.event import format_timestamp, new_event_id
+
+REFERENCE_EVENT = json.loads(
+    (Path(__file__).parent.parent / "data/reference_event.json").read_text()
+)
+
+
+def test_reference_guide_example_event_validates() -> None:
+    assert find_violation(REFERENCE_EVENT) is None
+
+
+def test_schema_covers_every_domain_of_the_reference_event() -> None:
+    properties = load_schema()["properties"]
+    for domain in (
+        "location",
+        "motion",
+        "power",
+        "operational",
+        "navigation",
+        "perception",
+        "actuators",
+        "payload",
+    ):
+        assert domain in REFERENCE_EVENT
+        assert domain in properties
+
+
+@pytest.mark.parametrize(
+    ("mutate", "path"),
+    [
+        (
+            lambda e: e["power"]["battery"].update(state_of_charge_pct=150.0),
+            "/power/battery/state_of_charge_pct",
+        ),
+        (lambda e: e["location"].update(latitude=None), "/location/latitude"),
+        (lambda e: e.update(source_type="boat"), "/source_type"),
+        (lambda e: e["perception"]["gps"].update(fix_type="great"), "/perception/gps/fix_type"),
+        (lambda e: e.update(captured_at="2025-01-15 14:23:01"), "/captured_at"),
+        (lambda e: e["motion"].update(invented=1), "/motion"),
+    ],
+)
+def test_violation_names_path_and_value(mutate, path: str) -> None:
+    event = copy.deepcopy(REFERENCE_EVENT)
+    mutate(event)
+    violation = find_violation(event)
+    assert violation is not None
+    assert violation.path == path
+
+
+def test_check_event_logs_warning_with_path_and_value(caplog: pytest.LogCaptureFixture) -> None:
+    event = copy.deepcopy(REFERENCE_EVENT)
+    event["power"]["battery"]["state_of_charge_pct"] = 150.0
+    with caplog.at_level(logging.WARNING):
+        assert check_event(event) is False
+    assert "/power/battery/state_of_charge_pct" in caplog.text
+    assert "150.0" in caplog.text
+    assert caplog.records[0].levelno == logging.WARNING
+
+
+def test_event_ids_are_uuid7_and_time_ordered() -> None:
+    first, second = new_event_id(1_000), new_event_id(2_000)
+    assert first[14] == "7" and first[19] in "89ab"
+    assert first < second
+    assert len({new_event_id(5) for _ in range(1000)}) == 1000
+
+
+@pytest.mark.parametrize(
+    ("unix_s", "text"),
+    [
+        (0.0, "1970-01-01T00:00:00.000Z"),
+        (1736951, "1970-01-21T02:29:11.000Z"),
+        (1736950981.042, "2025-01-15T14:23:01.042Z"),
+        (1736950981.9996, "2025-01-15T14:23:02.000Z"),
+    ],
+)
+def test_timestamps_are_utc_with_milliseconds(unix_s: float, text: str) -> None:
+    assert format_timestamp(unix_s) == text
+
+
+def _leaf_paths(schema: dict, node: dict, prefix: str) -> list[str]:
+    if "$ref" in node:
+        node = schema["definitions"][node["$ref"].split("/")[-1]]
+    if node.get("type") == "array" and "items" in node:
+        return _leaf_paths(schema, node["items"], prefix + "[]")
+    if "properties" in node:
+        return [
+            path
+            for name, child in node["properties"].items()
+            if name != "sources"
+            for path in _leaf_paths(schema, child, f"{prefix}.{name}" if prefix else name)
+        ]
+    return [prefix]
+
+
+def test_docs_describe_every_field_of_the_schema() -> None:
+    doc = (Path(__file__).parents[2] / "docs" / "udm.md").read_text()
+    schema = load_schema()
+    missing = [path for path in _leaf_paths(schema, schema, "") if f"`{path}`" not in doc]
+    assert missing == []
