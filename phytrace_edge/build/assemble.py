@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from phytrace_edge.ingest.convert import compass_heading_deg, compact, finite
+from phytrace_edge.ingest.convert import compact, compass_heading_deg, finite
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
