@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -209,3 +210,21 @@ def test_config_command_bad_value_is_one_line_no_traceback(env: dict, setting: s
     assert result.stderr.count("\n") == 1
     assert result.stderr.startswith(f"phytrace-edge: error: {setting}=")
     assert "Traceback" not in result.stderr
+
+
+def test_config_piped_into_a_closed_reader_exits_quietly() -> None:
+    """`phytrace-edge config | head -1`: the reader is gone before the output is written."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "phytrace_edge", "config"],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=60,
+        )
+    finally:
+        os.close(write_end)
+    assert "Traceback" not in result.stderr
+    assert result.returncode == 0
