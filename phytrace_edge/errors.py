@@ -6,10 +6,12 @@ that line and exits non-zero; it never prints a traceback for these.
 
     PhytraceError
     ├── ConfigError          a setting has a value that is not allowed
-    └── MalformedMessage     a ROS message cannot be turned into a reading
+    ├── MalformedMessage     a ROS message cannot be turned into a reading
+    └── QueueError           the queue database cannot do what was asked
+        ├── QueueBusyError   another process held the write lock past the busy timeout
+        └── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
 
-Later stages add their own branches here (queue and send errors), so that whether an
-error is retryable is its type, never a string match.
+Whether an error is worth retrying is its type, never a string match.
 """
 
 from __future__ import annotations
@@ -34,3 +36,15 @@ class MalformedMessage(PhytraceError):
         super().__init__(f"{reason}: {detail}")
         self.reason = reason
         self.detail = detail
+
+
+class QueueError(PhytraceError):
+    """The queue database cannot do what was asked."""
+
+
+class QueueBusyError(QueueError):
+    """Another process held the queue's write lock for longer than the busy timeout."""
+
+
+class QueueFullError(QueueError):
+    """The disk under the queue is full; free space or lower QUEUE_MAX_BYTES."""

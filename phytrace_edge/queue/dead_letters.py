@@ -1,0 +1,109 @@
+"""Dead letters: events PhyCloud rejected for good, kept for an operator to inspect.
+
+The workflow: ``list`` what is there and why, ``export`` it as JSON Lines to look at
+or hand to PhyCloud support, then ``requeue`` (after PhyCloud or the robot was fixed:
+the events go to the back of the queue and are sent again) or ``purge``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import IO, Any
+
+import orjson
+
+from phytrace_edge.queue.store import QueueStore, bump_counters
+
+_COLUMNS = "id, event_id, queued_at, dead_at, reason, status_code, response, json_size"
+
+
+@dataclass(frozen=True)
+class DeadLetterInfo:
+    """One dead letter without its body."""
+
+    id: int
+    event_id: str
+    queued_at: float
+    dead_at: float
+    reason: str
+    status_code: int | None
+    response: str | None
+    json_size: int
+
+
+class DeadLetterBox:
+    """List, export, requeue and purge the dead letters of one queue."""
+
+    def __init__(self, store: QueueStore) -> None:
+        self._store = store
+
+    def count(self) -> int:
+        return int(self._store.read("SELECT count(*) FROM dead_letters")[0][0])
+
+    def list(self, limit: int = 100, offset: int = 0) -> list[DeadLetterInfo]:
+        """Oldest first."""
+        rows = self._store.read(
+            f"SELECT {_COLUMNS} FROM dead_letters ORDER BY id LIMIT ? OFFSET ?", (limit, offset)
+        )
+        return [DeadLetterInfo(*row) for row in rows]
+
+    def iter_events(self, chunk: int = 500) -> Iterator[tuple[DeadLetterInfo, dict[str, Any]]]:
+        """Every dead letter with its decoded event, oldest first, a chunk at a time."""
+        after = 0
+        while True:
+            rows = self._store.read(
+                f"SELECT {_COLUMNS}, codec, dict_id, body FROM dead_letters "
+                "WHERE id > ? ORDER BY id LIMIT ?",
+                (after, chunk),
+            )
+            if not rows:
+                return
+            for *info, codec, dict_id, body in rows:
+                event = orjson.loads(self._store.codecs.decode(codec, dict_id, body))
+                yield DeadLetterInfo(*info), event
+            after = rows[-1][0]
+
+    def export(self, out: IO[bytes]) -> int:
+        """Write JSON Lines ``{"dead_letter": {...}, "event": {...}}``; the count."""
+        written = 0
+        for info, event in self.iter_events():
+            line = {"dead_letter": vars(info), "event": event}
+            out.write(orjson.dumps(line) + b"\n")
+            written += 1
+        return written
+
+    def requeue(self, ids: Sequence[int] | None = None) -> int:
+        """Move dead letters (all, or ``ids``) back to the end of the queue."""
+        where, params = _selection(ids)
+        now = self._store.now()
+        with self._store.transaction() as cursor:
+            moved = cursor.execute(
+                "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
+                f"SELECT event_id, ?, codec, dict_id, json_size, body FROM dead_letters {where} "
+                "ORDER BY id",
+                (now, *params),
+            ).rowcount
+            size = cursor.execute(
+                f"SELECT coalesce(sum(length(body)), 0) FROM dead_letters {where}", params
+            ).fetchone()[0]
+            cursor.execute(f"DELETE FROM dead_letters {where}", params)
+            bump_counters(cursor, depth=moved, stored_bytes=size, requeued_total=moved)
+        return int(moved)
+
+    def purge(self, ids: Sequence[int] | None = None, before: float | None = None) -> int:
+        """Delete dead letters: all, ``ids``, or those that died before ``before``."""
+        where, selected = _selection(ids)
+        params: tuple[float, ...] = selected
+        if before is not None:
+            where += (" AND" if where else "WHERE") + " dead_at < ?"
+            params = (*selected, before)
+        with self._store.transaction() as cursor:
+            return int(cursor.execute(f"DELETE FROM dead_letters {where}", params).rowcount)
+
+
+def _selection(ids: Sequence[int] | None) -> tuple[str, tuple[int, ...]]:
+    if ids is None:
+        return "", ()
+    marks = ",".join("?" * len(ids)) or "NULL"
+    return f"WHERE id IN ({marks})", tuple(ids)
