@@ -1,0 +1,433 @@
+"""QueueStore on real SQLite files: put/claim/ack/release, leases, caps, TTL, codecs,
+dead letters, corrupt files, disk full, busy locks, migrations, space reclaim."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+import sqlite3
+import stat
+import threading
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+import orjson
+import pytest
+import zstandard
+
+from phytrace_edge.config import MIB
+from phytrace_edge.errors import QueueBusyError
+from phytrace_edge.queue import DeadLetter, QueueLimits, QueueStore
+from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
+from phytrace_edge.queue.dead_letters import DeadLetterBox
+from phytrace_edge.queue.migrate import migrate
+from phytrace_edge.queue.recovery import connect
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 1_800_000_000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def event(n: int, pad: int = 0) -> dict:
+    return {
+        "event_id": str(uuid.UUID(int=n)),
+        "event_type": "telemetry.periodic",
+        "seq": n,
+        "note": "x" * pad,
+    }
+
+
+@pytest.fixture
+def clock() -> Clock:
+    return Clock()
+
+
+@pytest.fixture
+def open_store(tmp_path: Path, clock: Clock) -> Callable[..., QueueStore]:
+    opened: list[QueueStore] = []
+
+    def make(name: str = "queue.db", **kwargs: object) -> QueueStore:
+        limits = kwargs.pop("limits", QueueLimits(max_bytes=64 * MIB))
+        store = QueueStore.open(tmp_path / "state" / name, limits=limits, clock=clock, **kwargs)
+        opened.append(store)
+        return store
+
+    yield make
+    for store in opened:
+        with contextlib.suppress(sqlite3.ProgrammingError):  # closed by the test
+            store.close()
+
+
+def seqs(batch) -> list[int]:
+    return [orjson.loads(e.json)["seq"] for e in batch.events]
+
+
+def test_file_is_private_wal_and_in_a_created_directory(open_store) -> None:
+    store = open_store()
+    store.put(event(1))
+    assert store.path.parent.is_dir()
+    assert stat.S_IMODE(store.path.stat().st_mode) == 0o600
+    wal = Path(f"{store.path}-wal")
+    assert wal.exists() and stat.S_IMODE(wal.stat().st_mode) == 0o600
+    assert store.read("PRAGMA journal_mode")[0][0] == "wal"
+
+
+def test_put_claim_ack_round_trip_keeps_json_exact(open_store) -> None:
+    store = open_store()
+    events = [event(i, pad=i) for i in range(5)]
+    assert store.put_many(events).accepted == 5
+    batch = store.claim_batch(10, MIB)
+    assert [orjson.loads(e.json) for e in batch.events] == events
+    assert [e.event_id for e in batch.events] == [e["event_id"] for e in events]
+    store.ack(batch)
+    stats = store.stats()
+    assert (stats.depth, stats.queued_total, stats.acked_total, stats.stored_bytes) == (0, 5, 5, 0)
+    assert store.claim_batch(10, MIB) is None
+
+
+def test_claims_are_oldest_first_and_never_overlap(open_store) -> None:
+    store = open_store()
+    store.put_many([event(i) for i in range(10)])
+    first = store.claim_batch(4, MIB)
+    second = store.claim_batch(4, MIB)
+    assert seqs(first) == [0, 1, 2, 3] and seqs(second) == [4, 5, 6, 7]
+    store.release(first)
+    assert seqs(store.claim_batch(10, MIB)) == [0, 1, 2, 3]  # stops at the leased range
+    assert seqs(store.claim_batch(10, MIB)) == [8, 9]
+
+
+def test_batch_byte_bound_but_always_one_event(open_store) -> None:
+    store = open_store()
+    store.put_many([event(0, pad=5000), event(1, pad=10), event(2, pad=10)])
+    assert seqs(store.claim_batch(10, 100)) == [0]
+    assert seqs(store.claim_batch(10, 200)) == [1]
+
+
+def test_expired_lease_comes_back_to_another_sender(tmp_path: Path, clock: Clock) -> None:
+    path = tmp_path / "q.db"
+    limits = QueueLimits(max_bytes=64 * MIB)
+    crashed = QueueStore.open(path, limits=limits, clock=clock, lease_s=30)
+    crashed.put_many([event(i) for i in range(3)])
+    assert seqs(crashed.claim_batch(10, MIB)) == [0, 1, 2]
+    other = QueueStore.open(path, limits=limits, clock=clock, lease_s=30)
+    assert other.claim_batch(10, MIB) is None
+    clock.now += 31
+    assert seqs(other.claim_batch(10, MIB)) == [0, 1, 2]
+    crashed.close()
+    other.close()
+
+
+def test_renew_keeps_the_lease(open_store, clock: Clock) -> None:
+    store = open_store(lease_s=30)
+    store.put(event(1))
+    batch = store.claim_batch(1, MIB)
+    clock.now += 20
+    assert store.renew(batch)
+    clock.now += 20
+    assert store.claim_batch(1, MIB) is None
+    clock.now += 11
+    assert store.renew(batch) is False  # expired and cleaned up by a claim
+    assert store.claim_batch(1, MIB) is not None
+
+
+def test_event_cap_drop_oldest(open_store) -> None:
+    store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5))
+    store.put_many([event(i) for i in range(5)])
+    result = store.put_many([event(i) for i in range(5, 8)])
+    assert (result.accepted, result.dropped) == (3, 0)
+    assert seqs(store.claim_batch(10, MIB)) == [3, 4, 5, 6, 7]
+    assert store.stats().drops == {"cap_events": 3}
+
+
+def test_event_cap_drop_newest(open_store) -> None:
+    store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5, on_full="drop_newest"))
+    store.put_many([event(i) for i in range(4)])
+    result = store.put_many([event(i) for i in range(4, 8)])
+    assert (result.accepted, result.dropped) == (1, 3)
+    assert seqs(store.claim_batch(10, MIB)) == [0, 1, 2, 3, 4]
+    assert store.stats().drops == {"cap_events": 3}
+
+
+def test_drop_oldest_spares_events_being_sent(open_store) -> None:
+    store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=4))
+    store.put_many([event(i) for i in range(4)])
+    sending = store.claim_batch(2, MIB)
+    store.put_many([event(4), event(5)])
+    assert seqs(store.claim_batch(10, MIB)) == [4, 5]
+    store.ack(sending)
+    assert store.stats().drops == {"cap_events": 2}
+
+
+@pytest.mark.parametrize("policy", ["drop_oldest", "drop_newest"])
+def test_byte_cap_bounds_the_file(open_store, policy: str) -> None:
+    cap = 2 * MIB
+    store = open_store(limits=QueueLimits(max_bytes=cap, on_full=policy), compression="none")
+    for start in range(0, 3000, 100):
+        result = store.put_many([event(i, pad=2000) for i in range(start, start + 100)])
+        assert store.file_bytes() <= cap + 64 * 1024  # the -shm index is not data
+        if policy == "drop_oldest":
+            assert result.dropped == 0  # room is made by dropping the oldest
+    stats = store.stats()
+    assert stats.drops["cap_bytes"] > 0
+    assert stats.depth + stats.drops["cap_bytes"] == 3000
+    first = seqs(store.claim_batch(1, MIB))[0]
+    assert (first > 0) if policy == "drop_oldest" else (first == 0)
+
+
+def test_ttl_expires_old_events_but_not_leased_ones(open_store, clock: Clock) -> None:
+    store = open_store(limits=QueueLimits(max_bytes=64 * MIB, ttl_s=3600), lease_s=7200)
+    store.put_many([event(i) for i in range(3)])
+    sending = store.claim_batch(1, MIB)
+    clock.now += 1800
+    store.put_many([event(3)])
+    clock.now += 1801
+    assert store.expire() == 2
+    assert store.stats().drops == {"ttl": 2}
+    rest = store.claim_batch(10, MIB)
+    assert seqs(rest) == [3]
+    store.ack(rest)
+    store.ack(sending)
+    assert store.stats().depth == 0
+
+
+@pytest.mark.parametrize("first", ["none", "gzip", "zstd"])
+@pytest.mark.parametrize("then", ["none", "gzip", "zstd"])
+def test_rows_stay_readable_when_compression_changes(open_store, first: str, then: str) -> None:
+    store = open_store(compression=first)
+    store.put_many([event(i, pad=300) for i in range(3)])
+    codec = store.read("SELECT codec FROM events LIMIT 1")[0][0]
+    assert codec == {"none": NONE, "gzip": GZIP, "zstd": ZSTD_DICT}[first]
+    store.close()
+    reopened = open_store(compression=then)
+    reopened.put(event(3, pad=300))
+    assert seqs(reopened.claim_batch(10, MIB)) == [0, 1, 2, 3]
+
+
+def test_zstd_dictionary_shrinks_events_and_is_kept_in_the_database(open_store) -> None:
+    from phytrace_edge.sim import run_simulation
+
+    events: list[dict] = []
+    run_simulation(100, sink=events.append)
+    store = open_store()
+    store.put_many(events)
+    stats = store.stats()
+    json_bytes = sum(len(orjson.dumps(e)) for e in events)
+    assert stats.stored_bytes * 5 < json_bytes  # at least 5x smaller at rest
+    (dict_id,) = store.read("SELECT DISTINCT dict_id FROM events")[0]
+    assert (
+        store.read("SELECT count(*) FROM zstd_dictionaries WHERE dict_id = ?", (dict_id,))[0][0]
+        == 1
+    )
+
+
+def test_rows_of_a_retired_dictionary_stay_readable(open_store) -> None:
+    samples = [orjson.dumps(event(i, pad=i % 50)) for i in range(2000)]
+    old = zstandard.train_dictionary(4096, samples)
+    store = open_store()
+    body = zstandard.ZstdCompressor(dict_data=old).compress(orjson.dumps(event(7)))
+    with store.transaction() as cursor:
+        cursor.execute(
+            "INSERT INTO zstd_dictionaries VALUES (?, ?, 0)", (old.dict_id(), old.as_bytes())
+        )
+        cursor.execute(
+            "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
+            "VALUES ('e7', 0, ?, ?, 40, ?)",
+            (ZSTD_DICT, old.dict_id(), body),
+        )
+        cursor.execute("INSERT INTO counters VALUES ('depth', 1)")
+    store.close()
+    assert seqs(open_store().claim_batch(1, MIB)) == [7]
+
+
+def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> None:
+    store = open_store()
+    store.put_many([event(i) for i in range(4)])
+    batch = store.claim_batch(4, MIB)
+    poison = batch.events[2]
+    store.ack(batch, [DeadLetter(poison.id, "rejected: 422", 422, '{"error": "bad field"}')])
+    stats = store.stats()
+    assert (stats.depth, stats.acked_total, stats.dead_letters) == (0, 3, 1)
+    assert stats.drops == {"rejected": 1}
+
+    box = DeadLetterBox(store)
+    (info,) = box.list()
+    assert (info.event_id, info.reason, info.status_code) == (poison.event_id, "rejected: 422", 422)
+    out = io.BytesIO()
+    assert box.export(out) == 1
+    line = orjson.loads(out.getvalue())
+    assert line["event"] == event(2) and line["dead_letter"]["response"] == '{"error": "bad field"}'
+
+    assert box.requeue() == 1
+    assert box.count() == 0 and seqs(store.claim_batch(10, MIB)) == [2]
+    again = store.claim_batch(10, MIB)
+    assert again is None
+    store.put(event(9))
+    batch = store.claim_batch(10, MIB)
+    store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 400", 400)])
+    clock.now += 100
+    assert box.purge(before=clock.now - 200) == 0
+    assert box.purge() == 1 and box.count() == 0
+
+
+def test_corrupt_file_is_moved_aside_and_a_fresh_queue_starts(
+    tmp_path: Path, open_store, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = tmp_path / "state" / "queue.db"
+    path.parent.mkdir()
+    garbage = b"this is not a database" * 100
+    path.write_bytes(garbage)
+    with caplog.at_level(logging.ERROR):
+        store = open_store()
+    moved = list(path.parent.glob("queue.db.corrupt-*"))
+    assert len(moved) == 1 and moved[0].read_bytes() == garbage
+    assert store.stats().quarantined == str(moved[0])
+    assert "moved to" in caplog.text and caplog.records[0].levelno == logging.ERROR
+    store.put(event(1))
+    assert seqs(store.claim_batch(1, MIB)) == [1]
+
+
+def test_damaged_pages_fail_the_check_and_are_moved_aside(tmp_path: Path, open_store) -> None:
+    store = open_store()
+    store.put_many([event(i, pad=3000) for i in range(200)])
+    store.reclaim_space(force=True)
+    store.close()
+    path = tmp_path / "state" / "queue.db"
+    data = bytearray(path.read_bytes())
+    data[8192:40960] = b"\xff" * (40960 - 8192)  # trash pages 3..10
+    path.write_bytes(bytes(data))
+    fresh = open_store()
+    assert fresh.stats().depth == 0
+    assert len(list(path.parent.glob("queue.db.corrupt-*"))) == 1
+
+
+def test_locked_queue_waits_for_the_lock_then_gives_up(tmp_path: Path, clock: Clock) -> None:
+    path = tmp_path / "q.db"
+    store = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB), busy_timeout_s=0.3)
+    holder = connect(path, 1.0)
+    holder.execute("BEGIN IMMEDIATE")
+    with pytest.raises(QueueBusyError, match="locked by another process"):
+        store.put(event(1))
+    released = threading.Event()
+
+    def release_soon() -> None:
+        released.wait(5)
+        holder.execute("COMMIT")
+
+    waiter = threading.Thread(target=release_soon)
+    waiter.start()
+    slow = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB), busy_timeout_s=10)
+    released.set()
+    assert slow.put(event(2)).accepted == 1  # retried inside the busy timeout
+    waiter.join()
+    assert store.read("PRAGMA integrity_check")[0][0] == "ok"
+    assert store.stats().depth == 1
+    store.close()
+    slow.close()
+    holder.close()
+
+
+def test_disk_full_is_survived_counted_and_recovers(open_store) -> None:
+    store = open_store(
+        limits=QueueLimits(max_bytes=64 * MIB, on_full="drop_newest"), compression="none"
+    )
+    store.put_many([event(i, pad=1000) for i in range(20)])
+    pages = store.read("PRAGMA page_count")[0][0]
+    store.read(f"PRAGMA max_page_count = {pages}")  # the "disk" is now full
+    result = store.put_many([event(i, pad=4000) for i in range(20, 30)])
+    assert (result.accepted, result.dropped) == (0, 10)
+    assert store.stats().drops == {"disk_full": 10}
+    assert store.stats().depth == 20
+    store.read(f"PRAGMA max_page_count = {pages * 100}")  # space returns
+    assert store.put(event(99)).accepted == 1
+    assert store.read("PRAGMA integrity_check")[0][0] == "ok"
+
+
+def test_disk_full_with_drop_oldest_evicts_to_keep_new_data(open_store) -> None:
+    store = open_store(compression="none")
+    store.put_many([event(i, pad=3000) for i in range(40)])
+    pages = store.read("PRAGMA page_count")[0][0]
+    store.read(f"PRAGMA max_page_count = {pages}")
+    assert store.put(event(100, pad=3000)).accepted == 1
+    stats = store.stats()
+    assert stats.drops["disk_full"] >= 1
+    assert stats.depth == 41 - stats.drops["disk_full"]
+
+
+def test_a_database_of_the_first_migration_is_upgraded(tmp_path: Path) -> None:
+    path = tmp_path / "old.db"
+    old = sqlite3.connect(path, isolation_level=None)
+    old.execute("PRAGMA journal_mode = WAL")
+    assert migrate(old, up_to=1) == 1
+    old.execute(
+        "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
+        "VALUES ('e1', 1.0, 0, NULL, 9, ?)",
+        (orjson.dumps({"seq": 1}),),
+    )
+    old.execute("INSERT INTO counters VALUES ('depth', 1)")
+    assert (
+        old.execute("SELECT count(*) FROM sqlite_master WHERE name = 'dead_letters'").fetchone()[0]
+        == 0
+    )
+    old.close()
+    store = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB))
+    assert store.read("PRAGMA user_version")[0][0] == 2
+    batch = store.claim_batch(5, MIB)
+    assert seqs(batch) == [1]
+    store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 422", 422)])
+    assert store.stats().dead_letters == 1
+    store.close()
+
+
+def test_a_drained_backlog_gives_its_space_back(open_store) -> None:
+    store = open_store(compression="none")
+    for start in range(0, 6000, 500):
+        store.put_many([event(i, pad=2000) for i in range(start, start + 500)])
+    store.reclaim_space(force=True)
+    peak = store.file_bytes()
+    assert peak > 10 * MIB
+    while (batch := store.claim_batch(500, 4 * MIB)) is not None:
+        store.ack(batch)
+    store.maintain()
+    assert store.file_bytes() < peak / 20
+
+
+def test_concurrent_put_and_claim_threads_lose_nothing(open_store) -> None:
+    store = open_store()
+    delivered: list[int] = []
+    done = threading.Event()
+
+    def produce() -> None:
+        for start in range(0, 2000, 50):
+            store.put_many([event(i) for i in range(start, start + 50)])
+        done.set()
+
+    def consume() -> None:
+        while not (done.is_set() and store.stats().depth == 0):
+            batch = store.claim_batch(64, MIB)
+            if batch is not None:
+                delivered.extend(seqs(batch))
+                store.ack(batch)
+
+    threads = [threading.Thread(target=produce), threading.Thread(target=consume)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(timeout=60)
+    assert sorted(delivered) == list(range(2000))
+
+
+def test_stats_are_readable_from_another_connection_during_a_write(open_store) -> None:
+    store = open_store()
+    store.put_many([event(i) for i in range(10)])
+    reader = sqlite3.connect(f"file:{store.path}?mode=ro", uri=True)
+    with store.transaction() as cursor:
+        cursor.execute("DELETE FROM events")  # uncommitted
+        depth = reader.execute("SELECT value FROM counters WHERE name = 'depth'").fetchone()[0]
+    assert depth == 10
+    reader.close()
