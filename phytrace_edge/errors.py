@@ -7,9 +7,16 @@ that line and exits non-zero; it never prints a traceback for these.
     PhytraceError
     ├── ConfigError          a setting has a value that is not allowed
     ├── MalformedMessage     a ROS message cannot be turned into a reading
-    └── QueueError           the queue database cannot do what was asked
-        ├── QueueBusyError   another process held the write lock past the busy timeout
-        └── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
+    ├── QueueError           the queue database cannot do what was asked
+    │   ├── QueueBusyError   another process held the write lock past the busy timeout
+    │   └── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
+    └── SendError            a batch did not reach PhyCloud this time
+        └── TransientSendError   retry it: 408/425/429/5xx, timeouts, connection errors
+            └── EndpointRefusedError  retry it, but slowly and loudly: 401/403 (key),
+                                      415 (encoding), other unexpected answers (config)
+
+A batch PhyCloud rejects as bad data (400/422/413) is not an error: the sender splits
+it and dead-letters the offending events. No SendError ever drops data.
 
 Whether an error is worth retrying is its type, never a string match.
 """
@@ -48,3 +55,21 @@ class QueueBusyError(QueueError):
 
 class QueueFullError(QueueError):
     """The disk under the queue is full; free space or lower QUEUE_MAX_BYTES."""
+
+
+class SendError(PhytraceError):
+    """A batch did not reach PhyCloud this time."""
+
+
+class TransientSendError(SendError):
+    """Worth retrying with backoff; ``retry_after`` is the server's wish, in seconds."""
+
+    def __init__(self, message: str, status: int | None = None, retry_after: float | None = None):
+        super().__init__(message)
+        self.status = status
+        self.retry_after = retry_after
+
+
+class EndpointRefusedError(TransientSendError):
+    """PhyCloud refuses us for a reason data cannot fix (the key, the encoding, the
+    endpoint address): keep the data, back off long, and tell the operator."""

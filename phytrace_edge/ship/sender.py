@@ -1,0 +1,274 @@
+"""The sender: drains the queue to PhyCloud in batches, never dropping data.
+
+Each round claims the oldest batch under a lease, sends it, and acks it when PhyCloud
+has it. Failures are retried with tenacity until they succeed or the sender is
+stopped; only PhyCloud refusing an event as bad data dead-letters it:
+
+- 2xx: ack; events PhyCloud refused individually go to dead letters.
+- 400/422: split the batch (at the index PhyCloud blamed, else in halves) and send
+  the parts, recursively, until the offending events are alone; dead-letter those.
+- 413: split likewise; a single event still too large is dead-lettered.
+- 408/425/429/5xx, timeouts, connection errors: retry, exponential backoff with full
+  jitter between RETRY_MIN_S and RETRY_MAX_S, or Retry-After when the server says.
+- 401/403/415 and unexpected answers: keep the data, retry at RETRY_MAX_S, log ERROR.
+
+Full jitter is also what makes a fleet recover politely: after an outage each robot's
+next attempt falls at a random point of its backoff window, so PhyCloud does not get
+every robot's backlog in the same second.
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
+
+from phytrace_edge.errors import EndpointRefusedError, TransientSendError
+from phytrace_edge.queue import Batch, DeadLetter, QueuedEvent, QueueStore
+from phytrace_edge.ship.request import encode_body, events_body, request_headers
+from phytrace_edge.ship.responses import Accepted, Refused, classify
+from phytrace_edge.ship.throttle import Throttle
+from phytrace_edge.ship.transport import Transport
+
+log = logging.getLogger(__name__)
+
+RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same time spreads
+POLL_INTERVAL_S = 0.25
+
+
+@dataclass(frozen=True)
+class SendPolicy:
+    """How batches are formed and retried (BATCH_SIZE, BATCH_MAX_BYTES, ...)."""
+
+    batch_size: int = 10
+    batch_max_bytes: int = 1024 * 1024
+    flush_interval_s: float = 2.0
+    retry_min_s: float = 0.5
+    retry_max_s: float = 60.0
+    http_compression: str = "gzip"
+    upload_max_bps: int | None = None
+
+
+@dataclass
+class SendStats:
+    """What status and metrics show about sending. Updated by the sender thread only."""
+
+    events_sent: int = 0
+    batches_sent: int = 0
+    bytes_sent: int = 0
+    retries: int = 0
+    batches_split: int = 0
+    dead_lettered: int = 0
+    auth_failures: int = 0
+    last_success_at: float | None = None
+    last_error: str | None = None
+    last_error_at: float | None = None
+    last_status: int | None = None
+    send_latencies_s: list[float] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        data = dict(vars(self))
+        data.pop("send_latencies_s")
+        return data
+
+
+class Stopped(Exception):
+    """The sender was asked to stop while a batch was still retrying."""
+
+
+class Sender:
+    """Ships the queue to PhyCloud; ``run`` in a thread, ``drain`` for the CLI."""
+
+    def __init__(
+        self,
+        store: QueueStore,
+        transport: Transport,
+        policy: SendPolicy,
+        *,
+        stop: threading.Event | None = None,
+        clock: Callable[[], float] = time.time,
+        rng: random.Random | None = None,
+        sleep: Callable[[float], object] | None = None,
+    ) -> None:
+        self.store = store
+        self.transport = transport
+        self.policy = policy
+        self.stop = stop or threading.Event()
+        self.stats = SendStats()
+        self._clock = clock
+        self._rng = rng or random.Random()
+        self._pause = sleep or self.stop.wait
+        self._throttle = Throttle(policy.upload_max_bps, self._sleep)
+        self._backoff = wait_random_exponential(
+            multiplier=policy.retry_min_s, max=policy.retry_max_s
+        )
+
+    # ------------------------------------------------------------------ loops
+
+    def run(self) -> None:
+        """Send until ``stop`` is set; the backlog drains on a timer, not only when new
+        events arrive."""
+        while not self.stop.is_set():
+            try:
+                sent = self.send_next_batch()
+            except Stopped:
+                return
+            if not sent:
+                self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
+
+    def drain(
+        self, deadline: float | None = None, progress: Callable[[int], None] | None = None
+    ) -> bool:
+        """Send everything queued now, partial batches included; True when empty."""
+        while not self.stop.is_set() and (deadline is None or time.monotonic() < deadline):
+            try:
+                sent = self.send_next_batch(flush=True)
+            except Stopped:
+                break
+            if progress is not None and sent:
+                progress(sent)
+            if not sent and self.store.stats_counter("depth") == 0:
+                return True
+            if not sent:
+                self.stop.wait(POLL_INTERVAL_S)  # another process holds what is left
+        return self.store.stats_counter("depth") == 0
+
+    def due(self) -> bool:
+        """Whether a batch should go now: a full batch waits, or the oldest event has
+        waited FLUSH_INTERVAL_S."""
+        depth, oldest = self.store.backlog()
+        if depth == 0 or oldest is None:
+            return False
+        return depth >= self.policy.batch_size or (
+            self._clock() - oldest >= self.policy.flush_interval_s
+        )
+
+    def send_next_batch(self, flush: bool = False) -> int:
+        """Claim, send and ack one batch; the number of events it held (0: none due)."""
+        if not flush and not self.due():
+            return 0
+        batch = self.store.claim_batch(self.policy.batch_size, self.policy.batch_max_bytes)
+        if batch is None:
+            return 0
+        try:
+            dead = self._deliver(batch, batch.events)
+        except Stopped:
+            self.store.release(batch)
+            raise
+        self.store.ack(batch, dead)
+        if dead:
+            self.stats.dead_lettered += len(dead)
+            log.error(
+                "%d event(s) rejected by PhyCloud moved to dead letters (%s) - see "
+                "phytrace-edge dead-letters list",
+                len(dead),
+                dead[0].reason,
+            )
+        return len(batch.events)
+
+    # ------------------------------------------------------------------ delivery
+
+    def _deliver(self, batch: Batch, events: Sequence[QueuedEvent]) -> list[DeadLetter]:
+        """Get ``events`` into PhyCloud; the ones it refuses for good, as dead letters."""
+        outcome = self._send_with_retries(batch, events)
+        if isinstance(outcome, Accepted):
+            return [
+                DeadLetter(events[i].id, f"rejected: {reason}", None, reason)
+                for i, reason in sorted(outcome.rejected.items())
+            ]
+        if len(events) == 1:
+            return [
+                DeadLetter(
+                    events[0].id, f"rejected: HTTP {outcome.status}", outcome.status, outcome.reason
+                )
+            ]
+        self.stats.batches_split += 1
+        return [dead for part in _split(events, outcome) for dead in self._deliver(batch, part)]
+
+    def _send_with_retries(self, batch: Batch, events: Sequence[QueuedEvent]) -> Accepted | Refused:
+        body = events_body(events)
+        encoded = encode_body(body, self.policy.http_compression)
+        headers = request_headers(events, self.policy.http_compression)
+        retrying = Retrying(
+            retry=retry_if_exception_type(TransientSendError),
+            wait=self._wait,
+            sleep=self._sleep,
+            before_sleep=lambda state: self._before_retry(batch, state),
+            reraise=True,
+        )
+        for attempt in retrying:
+            with attempt:
+                if self.stop.is_set():
+                    raise Stopped
+                self._throttle.wait(len(encoded))
+                started = time.monotonic()
+                reply = self.transport.post_events(encoded, headers)
+                outcome = classify(reply, len(events), self._clock())
+                self.stats.send_latencies_s.append(time.monotonic() - started)
+                del self.stats.send_latencies_s[:-1000]
+                self._record_success(len(events), len(encoded), reply.status)
+                return outcome
+        raise AssertionError("tenacity returns or raises")
+
+    def _wait(self, state: RetryCallState) -> float:
+        """Retry-After when the server gave one (plus a little jitter); RETRY_MAX_S for
+        refusals data cannot fix; else exponential backoff with full jitter."""
+        exc = state.outcome.exception() if state.outcome else None
+        if isinstance(exc, EndpointRefusedError):
+            return self.policy.retry_max_s
+        if isinstance(exc, TransientSendError) and exc.retry_after is not None:
+            return exc.retry_after * (1 + RETRY_AFTER_JITTER * self._rng.random())
+        return float(self._backoff(state))
+
+    def _sleep(self, seconds: float) -> None:
+        """Sleep, but wake up at once when asked to stop."""
+        self._pause(seconds)
+        if self.stop.is_set():
+            raise Stopped
+
+    def _before_retry(self, batch: Batch, state: RetryCallState) -> None:
+        exc = state.outcome.exception() if state.outcome else None
+        self.stats.retries += 1
+        self.stats.last_error = str(exc)
+        self.stats.last_error_at = self._clock()
+        self.stats.last_status = getattr(exc, "status", None)
+        if isinstance(exc, EndpointRefusedError):
+            if exc.status in (401, 403):
+                self.stats.auth_failures += 1
+            log.error(
+                "%s; keeping %d queued event(s), retrying in %.0f s",
+                exc,
+                self.store.stats_counter("depth"),
+                state.upcoming_sleep,
+            )
+        elif state.attempt_number == 1 or state.attempt_number % 10 == 0:
+            log.warning(
+                "send failed (%s), attempt %d; retrying in %.1f s",
+                exc,
+                state.attempt_number,
+                state.upcoming_sleep,
+            )
+        self.store.renew(batch)
+
+    def _record_success(self, events: int, size: int, status: int) -> None:
+        if 200 <= status < 300:
+            self.stats.events_sent += events
+            self.stats.batches_sent += 1
+            self.stats.bytes_sent += size
+            self.stats.last_success_at = self._clock()
+        self.stats.last_status = status
+
+
+def _split(events: Sequence[QueuedEvent], refused: Refused) -> list[Sequence[QueuedEvent]]:
+    """Parts to resend: around the event PhyCloud blamed, else two halves."""
+    if refused.index is not None and refused.status != 413:
+        i = refused.index
+        return [part for part in (events[:i], events[i : i + 1], events[i + 1 :]) if part]
+    middle = len(events) // 2
+    return [events[:middle], events[middle:]]

@@ -1,0 +1,304 @@
+"""The sender against fake transports: retries, Retry-After, splitting, dead letters,
+auth refusals, stopping, flushing, throttling. Waits are recorded, not slept."""
+
+from __future__ import annotations
+
+import gzip
+import logging
+import threading
+from collections.abc import Mapping
+from pathlib import Path
+
+import orjson
+import pytest
+import zstandard
+
+from phytrace_edge.config import MIB, Secret
+from phytrace_edge.errors import TransientSendError
+from phytrace_edge.queue import QueueLimits, QueueStore
+from phytrace_edge.queue.dead_letters import DeadLetterBox
+from phytrace_edge.ship import FunctionTransport, HttpTransport, Sender, SendPolicy
+from phytrace_edge.ship.request import idempotency_key
+from phytrace_edge.ship.responses import Reply, parse_retry_after
+from phytrace_edge.ship.throttle import Throttle
+
+
+class FakeCloud:
+    """A scripted PhyCloud: ``script`` answers first, then everything is accepted."""
+
+    def __init__(self, *script: object, reject=lambda event: None) -> None:
+        self.script = list(script)
+        self.reject = reject  # event -> reason when the event is bad data
+        self.requests: list[tuple[list[dict], dict]] = []
+        self.stored: dict[str, dict] = {}
+
+    def __call__(self, body: bytes, headers: Mapping[str, str]) -> Reply:
+        encoding = headers.get("Content-Encoding")
+        raw = (
+            gzip.decompress(body)
+            if encoding == "gzip"
+            else (zstandard.ZstdDecompressor().decompress(body) if encoding == "zstd" else body)
+        )
+        events = orjson.loads(raw)["events"]
+        self.requests.append((events, dict(headers)))
+        if self.script:
+            answer = self.script.pop(0)
+            if isinstance(answer, Exception):
+                raise answer
+            status, extra = answer if isinstance(answer, tuple) else (answer, {})
+            return Reply(status, extra, b'{"error": "scripted"}')
+        for index, event in enumerate(events):
+            reason = self.reject(event)
+            if reason:
+                return Reply(400, {}, orjson.dumps({"error": reason, "index": index}))
+        for event in events:
+            self.stored[event["event_id"]] = event
+        return Reply(
+            200, {}, orjson.dumps({"accepted": len(events), "duplicates": 0, "rejected": []})
+        )
+
+
+@pytest.fixture
+def store(tmp_path: Path):
+    with QueueStore.open(tmp_path / "q.db", limits=QueueLimits(max_bytes=64 * MIB)) as store:
+        yield store
+
+
+def put(store: QueueStore, count: int, start: int = 0, **extra) -> list[str]:
+    events = [{"event_id": f"e{i:05d}", "seq": i, **extra} for i in range(start, start + count)]
+    store.put_many(events)
+    return [e["event_id"] for e in events]
+
+
+def sender(store, cloud, waits=None, **policy) -> Sender:
+    policy.setdefault("batch_size", 10)
+    return Sender(
+        store,
+        FunctionTransport(cloud),
+        SendPolicy(**policy),
+        sleep=(waits.append if waits is not None else lambda s: None),
+    )
+
+
+def test_delivers_in_batches_in_order(store) -> None:
+    ids = put(store, 25)
+    cloud = FakeCloud()
+    s = sender(store, cloud)
+    assert s.drain() is True
+    assert [len(events) for events, _ in cloud.requests] == [10, 10, 5]
+    assert [e["event_id"] for events, _ in cloud.requests for e in events] == ids
+    assert (s.stats.events_sent, s.stats.batches_sent) == (25, 3)
+    assert store.stats().acked_total == 25
+
+
+@pytest.mark.parametrize("encoding", ["gzip", "zstd", "none"])
+def test_headers_and_encodings(store, encoding: str) -> None:
+    put(store, 3)
+    cloud = FakeCloud()
+    sender(store, cloud, http_compression=encoding).drain()
+    ((events, headers),) = cloud.requests
+    assert len(events) == 3
+    assert headers.get("Content-Encoding") == (None if encoding == "none" else encoding)
+    assert headers["Content-Type"] == "application/json"
+    assert headers["User-Agent"].startswith("phytrace-edge/")
+    assert len(headers["Idempotency-Key"]) == 64
+
+
+def test_idempotency_key_is_stable_for_the_same_batch(store) -> None:
+    put(store, 4)
+    cloud = FakeCloud(503)
+    sender(store, cloud).drain()
+    first, second = (headers["Idempotency-Key"] for _, headers in cloud.requests)
+    assert first == second
+    batch = store.claim_batch(1, MIB)
+    assert batch is None
+    assert idempotency_key([]) != first
+
+
+def test_retries_5xx_and_timeouts_with_growing_jittered_backoff(store) -> None:
+    put(store, 5)
+    waits: list[float] = []
+    cloud = FakeCloud(500, 502, TransientSendError("timeout"), 503, 504, 408, 425, 429)
+    s = sender(store, cloud, waits, retry_min_s=1, retry_max_s=8)
+    assert s.drain() is True
+    assert len(cloud.requests) == 9 and len(cloud.stored) == 5
+    assert s.stats.retries == 8
+    assert all(0 <= w <= 8 for w in waits) and len(waits) == 8
+    assert store.stats().drops == {}
+
+
+def test_retry_after_seconds_and_http_date_are_honoured(store) -> None:
+    put(store, 2)
+    waits: list[float] = []
+    cloud = FakeCloud(
+        (503, {"retry-after": "7"}), (429, {"retry-after": "Wed, 21 Oct 2099 07:28:00 GMT"})
+    )
+    sender(store, cloud, waits, retry_max_s=2).drain()
+    assert 7 <= waits[0] <= 7 * 1.2
+    assert 3600 <= waits[1] <= 3600 * 1.2  # an HTTP-date far away is capped at an hour
+
+
+@pytest.mark.parametrize(
+    ("value", "seconds"),
+    [
+        ("120", 120.0),
+        ("0", 0.0),
+        ("-5", 0.0),
+        ("soon", None),
+        ("", None),
+        (None, None),
+        ("Thu, 01 Jan 1970 00:00:10 GMT", 0.0),
+        ("1e9", 3600.0),
+        ("nan", None),
+    ],
+)
+def test_parse_retry_after(value, seconds) -> None:
+    assert parse_retry_after(value, now=1000.0) == seconds
+
+
+def test_poison_event_is_isolated_and_dead_lettered(store) -> None:
+    put(store, 250)
+    put(store, 1, start=250, poison=True)
+    put(store, 249, start=251)
+    cloud = FakeCloud(reject=lambda e: "bad field" if e.get("poison") else None)
+    s = sender(store, cloud, batch_size=500)
+    assert s.drain() is True
+    assert len(cloud.stored) == 499 and "e00250" not in cloud.stored
+    (letter,) = DeadLetterBox(store).list()
+    assert letter.event_id == "e00250" and letter.status_code == 400
+    assert s.stats.dead_lettered == 1 and store.stats().drops == {"rejected": 1}
+    assert len(cloud.requests) <= 4  # split at the blamed index: before, it, after
+
+
+def test_without_an_index_the_batch_is_bisected(store) -> None:
+    put(store, 64)
+    bad = {"e00003", "e00040"}
+
+    def reject(event):  # PhyCloud that does not say which event is bad
+        return "bad" if event["event_id"] in bad else None
+
+    cloud = FakeCloud(reject=reject)
+    cloud_call = cloud.__call__
+
+    def no_index(body, headers):
+        reply = cloud_call(body, headers)
+        return Reply(reply.status, {}, b"{}") if reply.status == 400 else reply
+
+    s = Sender(store, FunctionTransport(no_index), SendPolicy(batch_size=64), sleep=lambda s: None)
+    assert s.drain() is True
+    assert set(cloud.stored) == {f"e{i:05d}" for i in range(64)} - bad
+    assert {d.event_id for d in DeadLetterBox(store).list()} == bad
+    assert s.stats.batches_split > 2
+
+
+def test_413_splits_until_it_fits(store) -> None:
+    put(store, 40)
+    put(store, 1, start=40, blob="x" * 50_000)
+
+    def small_bodies_only(body, headers):
+        if len(body) > 20_000:
+            return Reply(413, {}, b'{"error": "too large"}')
+        return cloud(body, headers)
+
+    cloud = FakeCloud()
+    s = Sender(
+        store,
+        FunctionTransport(small_bodies_only),
+        SendPolicy(batch_size=100, http_compression="none"),
+        sleep=lambda s: None,
+    )
+    assert s.drain() is True
+    assert len(cloud.stored) == 40
+    (letter,) = DeadLetterBox(store).list()
+    assert letter.event_id == "e00040" and letter.status_code == 413
+
+
+def test_per_event_rejections_in_a_2xx_are_dead_lettered(store) -> None:
+    put(store, 3)
+
+    def partial(body, headers):
+        return Reply(
+            200,
+            {},
+            orjson.dumps(
+                {
+                    "accepted": 2,
+                    "duplicates": 0,
+                    "rejected": [{"index": 1, "event_id": "e00001", "reason": "unknown robot"}],
+                }
+            ),
+        )
+
+    Sender(store, FunctionTransport(partial), SendPolicy(), sleep=lambda s: None).drain()
+    (letter,) = DeadLetterBox(store).list()
+    assert letter.event_id == "e00001" and "unknown robot" in letter.reason
+
+
+@pytest.mark.parametrize("status", [401, 403, 415, 404, 301])
+def test_refusals_keep_the_data_and_back_off_long(
+    store, status: int, caplog: pytest.LogCaptureFixture
+) -> None:
+    put(store, 5)
+    waits: list[float] = []
+    cloud = FakeCloud(status, status, status)
+    with caplog.at_level(logging.ERROR):
+        s = sender(store, cloud, waits, retry_max_s=45)
+        assert s.drain() is True
+    assert waits == [45, 45, 45]
+    assert len(cloud.stored) == 5 and store.stats().drops == {}
+    assert f"HTTP {status}" in caplog.text
+    assert s.stats.auth_failures == (3 if status in (401, 403) else 0)
+
+
+def test_stop_while_retrying_releases_the_batch(store) -> None:
+    put(store, 5)
+    stop = threading.Event()
+
+    def down(body, headers):
+        stop.set()  # asked to stop while PhyCloud is down
+        return Reply(503, {}, b"")
+
+    s = Sender(store, FunctionTransport(down), SendPolicy(), stop=stop, sleep=stop.wait)
+    s.run()
+    assert store.stats().depth == 5 and store.stats().leased == 0
+
+
+def test_partial_batch_waits_for_the_flush_interval(store) -> None:
+    now = [1000.0]
+    put(store, 3)
+    cloud = FakeCloud()
+    s = Sender(
+        store,
+        FunctionTransport(cloud),
+        SendPolicy(batch_size=10, flush_interval_s=2),
+        clock=lambda: now[0],
+        sleep=lambda s: None,
+    )
+    store_queued_at = store.backlog()[1]
+    now[0] = store_queued_at + 1.0
+    assert s.send_next_batch() == 0
+    now[0] = store_queued_at + 2.0
+    assert s.send_next_batch() == 3
+
+
+def test_throttle_spreads_bytes_over_time() -> None:
+    clock = [0.0]
+    waits: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        waits.append(seconds)
+        clock[0] += seconds
+
+    throttle = Throttle(1000, sleep, clock=lambda: clock[0])
+    for _ in range(5):
+        throttle.wait(500)
+    assert clock[0] == pytest.approx(1.5)  # 2500 bytes at 1000 B/s with a 1 s burst
+    assert Throttle(None, sleep).wait(10**9) == 0
+
+
+def test_plain_http_to_a_remote_host_warns(caplog: pytest.LogCaptureFixture) -> None:
+    with caplog.at_level(logging.WARNING):
+        HttpTransport("http://127.0.0.1:9/api/v1", Secret("k"), 1).close()
+        assert caplog.text == ""
+        HttpTransport("http://phycloud.example.com/api/v1", Secret("phk_live_secret"), 1).close()
+    assert "plain http" in caplog.text and "phk_live_secret" not in caplog.text
