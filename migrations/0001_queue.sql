@@ -21,7 +21,8 @@ CREATE TABLE leases (
 );
 
 -- Exact counters kept in the same transactions that change the queue, so status reads
--- them without scanning: depth, stored_bytes, queued_total, acked_total, drop:<reason>.
+-- them without scanning: depth, stored_bytes, queued_total, acked_total, dead_letters,
+-- requeued_total, drop:<reason>.
 CREATE TABLE counters (
     name  TEXT PRIMARY KEY,
     value INTEGER NOT NULL

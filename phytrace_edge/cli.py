@@ -12,7 +12,7 @@ import logging
 import os
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import orjson
 
@@ -20,11 +20,15 @@ from phytrace_edge import __version__
 from phytrace_edge.config import (
     LoadedSettings,
     Secret,
+    Settings,
     format_bytes,
     setting_infos,
     settings_from_environment,
 )
 from phytrace_edge.errors import PhytraceError
+
+if TYPE_CHECKING:
+    from phytrace_edge.queue import QueueStore
 
 EXIT_BAD_INPUT = 2
 Command = Callable[[argparse.Namespace, LoadedSettings], int]
@@ -90,6 +94,93 @@ def cmd_sim(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     return 0 if stats["events_failed"] == 0 else 1
 
 
+def open_queue(settings: Settings) -> QueueStore:
+    """The queue named by the settings (QUEUE_PATH and the caps)."""
+    from phytrace_edge.queue import QueueLimits, QueueStore
+
+    limits = QueueLimits(
+        max_bytes=settings.queue_max_bytes,
+        max_events=settings.queue_max_events,
+        on_full=settings.queue_on_full,
+        ttl_s=settings.queue_ttl_s,
+    )
+    return QueueStore.open(
+        str(settings.queue_path),
+        limits=limits,
+        compression=settings.queue_compression,
+        sync=settings.queue_sync,
+    )
+
+
+def _when(unix_s: float) -> str:
+    from phytrace_edge.udm.event import format_timestamp
+
+    return format_timestamp(unix_s)
+
+
+def cmd_dead_letters(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Inspect, export, requeue or purge events PhyCloud rejected for good."""
+    from phytrace_edge.queue.dead_letters import DeadLetterBox
+
+    with open_queue(loaded.settings) as store:
+        box = DeadLetterBox(store)
+        ids = args.ids or None
+        if args.action == "list":
+            letters = box.list(limit=args.limit)
+            print(f"{box.count()} dead letter(s) in {store.path}")
+            for letter in letters:
+                print(
+                    f"{letter.id:>6}  {_when(letter.dead_at)}  {letter.event_id}  "
+                    f"{letter.reason}  {(letter.response or '')[:60]}"
+                )
+        elif args.action == "export":
+            if args.output == "-":
+                written = box.export(sys.stdout.buffer)
+            else:
+                with open(args.output, "wb") as out:  # noqa: PTH123 - a binary stream
+                    written = box.export(out)
+            print(f"exported {written} dead letter(s)", file=sys.stderr)
+        elif args.action == "requeue":
+            print(f"requeued {box.requeue(ids)} dead letter(s) at the end of the queue")
+        else:
+            before = (
+                None
+                if args.older_than_days is None
+                else (store.now() - args.older_than_days * 86400)
+            )
+            if ids is None and before is None and not args.all:
+                print(
+                    "phytrace-edge: error: purge needs ids, --older-than-days or --all",
+                    file=sys.stderr,
+                )
+                return EXIT_BAD_INPUT
+            print(f"purged {box.purge(ids, before=before)} dead letter(s)")
+    return 0
+
+
+def cmd_stub(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Run the PhyCloud dev stub until interrupted."""
+    from phytrace_edge.stub.faults import Faults
+    from phytrace_edge.stub.server import run_stub
+
+    faults = Faults(
+        error_rate=args.error_rate,
+        error_status=args.error_status,
+        fixed_status=args.fixed_status,
+        retry_after=args.retry_after,
+        latency_s=args.latency,
+        drop_rate=args.drop_rate,
+        partial_rejects=args.partial_rejects,
+    )
+    try:
+        faults.check()
+    except ValueError as exc:
+        print(f"phytrace-edge: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    run_stub(args.host, args.port, args.db, args.api_key, faults, args.seed)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="phytrace-edge",
@@ -108,7 +199,42 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--realtime", action="store_true", help="run at wall-clock pace")
     sim.set_defaults(handler=cmd_sim)
 
-    for command in (config, sim):
+    dead = commands.add_parser(
+        "dead-letters", help="list, export, requeue or purge events PhyCloud rejected"
+    )
+    dead.add_argument("action", choices=["list", "export", "requeue", "purge"])
+    dead.add_argument("ids", nargs="*", type=int, help="dead letter ids (default: all)")
+    dead.add_argument("--limit", type=int, default=100, help="list at most this many")
+    dead.add_argument("--output", "-o", default="-", help="export to this file (- = stdout)")
+    dead.add_argument("--older-than-days", type=float, help="purge only those older")
+    dead.add_argument("--all", action="store_true", help="purge all")
+    dead.set_defaults(handler=cmd_dead_letters)
+
+    stub = commands.add_parser("stub", help="run the PhyCloud dev stub (HTTP server)")
+    stub.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    stub.add_argument("--port", type=int, default=8000, help="port (0 = any free port)")
+    stub.add_argument("--db", default="phycloud-stub.db", help="the stub's SQLite file")
+    stub.add_argument("--api-key", help="require this Bearer key (default: accept any)")
+    stub.add_argument("--error-rate", type=float, default=0.0, help="fraction answered with errors")
+    stub.add_argument("--error-status", type=int, default=503, help="status of those errors")
+    stub.add_argument("--fixed-status", type=int, help="answer every POST with this status")
+    stub.add_argument("--retry-after", help="Retry-After value sent with injected errors")
+    stub.add_argument("--latency", type=float, default=0.0, help="seconds before answering")
+    stub.add_argument(
+        "--drop-rate",
+        type=float,
+        default=0.0,
+        help="fraction of POSTs whose connection is dropped after storing",
+    )
+    stub.add_argument(
+        "--partial-rejects",
+        action="store_true",
+        help="answer schema violations with 200 and per-event rejections",
+    )
+    stub.add_argument("--seed", type=int, help="seed of the fault injection RNG")
+    stub.set_defaults(handler=cmd_stub)
+
+    for command in (config, sim, dead):
         _setting_flags(command)
     return parser
 
@@ -117,7 +243,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phytrace-edge`` console script."""
     args = build_parser().parse_args(argv)
     try:
-        loaded = settings_from_environment(_flags(args), config_path=args.config)
+        loaded = settings_from_environment(_flags(args), config_path=getattr(args, "config", None))
         logging.basicConfig(
             level=loaded.settings.log_level,
             format="%(asctime)s %(levelname)s %(name)s: %(message)s",

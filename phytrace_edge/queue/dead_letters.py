@@ -39,7 +39,7 @@ class DeadLetterBox:
         self._store = store
 
     def count(self) -> int:
-        return int(self._store.read("SELECT count(*) FROM dead_letters")[0][0])
+        return self._store.stats_counter("dead_letters")
 
     def list(self, limit: int = 100, offset: int = 0) -> list[DeadLetterInfo]:
         """Oldest first."""
@@ -88,7 +88,9 @@ class DeadLetterBox:
                 f"SELECT coalesce(sum(length(body)), 0) FROM dead_letters {where}", params
             ).fetchone()[0]
             cursor.execute(f"DELETE FROM dead_letters {where}", params)
-            bump_counters(cursor, depth=moved, stored_bytes=size, requeued_total=moved)
+            bump_counters(
+                cursor, depth=moved, stored_bytes=size, requeued_total=moved, dead_letters=-moved
+            )
         return int(moved)
 
     def purge(self, ids: Sequence[int] | None = None, before: float | None = None) -> int:
@@ -99,7 +101,9 @@ class DeadLetterBox:
             where += (" AND" if where else "WHERE") + " dead_at < ?"
             params = (*selected, before)
         with self._store.transaction() as cursor:
-            return int(cursor.execute(f"DELETE FROM dead_letters {where}", params).rowcount)
+            purged = int(cursor.execute(f"DELETE FROM dead_letters {where}", params).rowcount)
+            bump_counters(cursor, dead_letters=-purged)
+        return purged
 
 
 def _selection(ids: Sequence[int] | None) -> tuple[str, tuple[int, ...]]:

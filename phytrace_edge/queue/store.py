@@ -484,9 +484,12 @@ class QueueStore:
             cursor.execute(
                 "DELETE FROM leases WHERE first_id = ? AND owner = ?", (batch.first_id, batch.owner)
             )
-            bump_counter(cursor, "acked_total", max(0, deleted - rejected))
-            if rejected:
-                bump_counter(cursor, "drop:rejected", rejected)
+            bump_counters(
+                cursor,
+                acked_total=max(0, deleted - rejected),
+                dead_letters=rejected,
+                **{"drop:rejected": rejected},
+            )
 
     def release(self, batch: Batch) -> None:
         """Give the batch back unsent: its events are claimable again at once."""
@@ -576,6 +579,15 @@ class QueueStore:
         rows = self.read("SELECT value FROM counters WHERE name = ?", (name,))
         return int(rows[0][0]) if rows else 0
 
+    def backlog(self) -> tuple[int, float | None]:
+        """(events queued, when the oldest was queued): two indexed lookups."""
+        rows = self.read(
+            "SELECT (SELECT value FROM counters WHERE name = 'depth'), "
+            "(SELECT queued_at FROM events ORDER BY id LIMIT 1)"
+        )
+        depth, oldest = rows[0]
+        return int(depth or 0), oldest
+
     def file_bytes(self) -> int:
         """Bytes on disk: the database, its WAL and shared-memory files."""
         total = 0
@@ -597,7 +609,7 @@ class QueueStore:
             oldest_queued_at=oldest[0][0] if oldest else None,
             newest_queued_at=newest[0][0] if newest else None,
             drops={k[5:]: v for k, v in counters.items() if k.startswith("drop:") and v},
-            dead_letters=self.read("SELECT count(*) FROM dead_letters")[0][0],
+            dead_letters=counters.get("dead_letters", 0),
             queued_total=counters.get("queued_total", 0),
             acked_total=counters.get("acked_total", 0),
             leased=self.read("SELECT count(*) FROM leases WHERE expires_at > ?", (self._clock(),))[

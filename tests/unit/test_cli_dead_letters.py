@@ -1,0 +1,49 @@
+"""The dead-letters command over a real queue file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import orjson
+import pytest
+
+from phytrace_edge.cli import main
+from phytrace_edge.config import MIB
+from phytrace_edge.queue import DeadLetter, QueueLimits, QueueStore
+
+
+@pytest.fixture
+def queue_path(tmp_path: Path) -> str:
+    path = tmp_path / "queue.db"
+    with QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB)) as store:
+        store.put_many([{"event_id": f"e{i}", "seq": i} for i in range(3)])
+        batch = store.claim_batch(3, MIB)
+        store.ack(batch, [DeadLetter(batch.events[1].id, "rejected: 422", 422, "bad seq")])
+    return str(path)
+
+
+def test_list_export_requeue_purge(
+    queue_path: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["dead-letters", "list", "--queue-path", queue_path]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("1 dead letter(s) in ")
+    assert "e1  rejected: 422  bad seq" in out
+
+    export = tmp_path / "dead.jsonl"
+    assert main(["dead-letters", "export", "-o", str(export), "--queue-path", queue_path]) == 0
+    (line,) = export.read_bytes().splitlines()
+    assert orjson.loads(line)["event"] == {"event_id": "e1", "seq": 1}
+
+    assert main(["dead-letters", "purge", "--queue-path", queue_path]) == 2
+    assert "purge needs ids" in capsys.readouterr().err
+
+    assert main(["dead-letters", "requeue", "--queue-path", queue_path]) == 0
+    assert "requeued 1" in capsys.readouterr().out
+    with QueueStore.open(queue_path, limits=QueueLimits(max_bytes=64 * MIB)) as store:
+        batch = store.claim_batch(10, MIB)
+        assert [orjson.loads(e.json)["seq"] for e in batch.events] == [1]
+        store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 400", 400)])
+
+    assert main(["dead-letters", "purge", "--all", "--queue-path", queue_path]) == 0
+    assert "purged 1" in capsys.readouterr().out
