@@ -78,6 +78,18 @@ def test_file_is_private_wal_and_in_a_created_directory(open_store) -> None:
     assert store.read("PRAGMA journal_mode")[0][0] == "wal"
 
 
+def test_warns_when_the_volume_is_smaller_than_the_cap(
+    open_store, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING):
+        open_store(limits=QueueLimits(max_bytes=2**60))
+    assert "the disk will fill before the cap" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        open_store("small.db", limits=QueueLimits(max_bytes=2 * MIB))
+    assert "disk will fill" not in caplog.text
+
+
 def test_put_claim_ack_round_trip_keeps_json_exact(open_store) -> None:
     store = open_store()
     events = [event(i, pad=i) for i in range(5)]
@@ -264,7 +276,8 @@ def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> Non
     assert line["event"] == event(2) and line["dead_letter"]["response"] == '{"error": "bad field"}'
 
     assert box.requeue() == 1
-    assert box.count() == 0 and seqs(store.claim_batch(10, MIB)) == [2]
+    assert box.count() == 0 and store.stats().dead_letters == 0
+    assert seqs(store.claim_batch(10, MIB)) == [2]
     again = store.claim_batch(10, MIB)
     assert again is None
     store.put(event(9))
@@ -272,7 +285,8 @@ def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> Non
     store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 400", 400)])
     clock.now += 100
     assert box.purge(before=clock.now - 200) == 0
-    assert box.purge() == 1 and box.count() == 0
+    assert store.stats().dead_letters == 1
+    assert box.purge() == 1 and box.count() == 0 and store.stats().dead_letters == 0
 
 
 def test_corrupt_file_is_moved_aside_and_a_fresh_queue_starts(
