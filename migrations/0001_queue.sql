@@ -1,9 +1,11 @@
 -- 0001: the queue of events waiting for PhyCloud.
--- One row per event; ids only grow (AUTOINCREMENT), so a lease's id range never
--- covers an event that was put after it was taken.
+-- One row per event. Ids only grow, so a lease's id range never covers an event that
+-- was put after it was taken: the store assigns them from the next_id counter, which
+-- lives on the page every commit writes anyway (AUTOINCREMENT would add a page write
+-- to every commit).
 
 CREATE TABLE events (
-    id         INTEGER PRIMARY KEY AUTOINCREMENT,
+    id         INTEGER PRIMARY KEY,
     event_id   TEXT    NOT NULL,          -- the UDM event_id, for idempotency and dead letters
     queued_at  REAL    NOT NULL,          -- unix seconds when put; TTL counts from here
     codec      INTEGER NOT NULL,          -- 0 none, 1 gzip, 2 zstd with dictionary
@@ -27,6 +29,8 @@ CREATE TABLE counters (
     name  TEXT PRIMARY KEY,
     value INTEGER NOT NULL
 ) WITHOUT ROWID;
+
+INSERT INTO counters(name, value) VALUES ('next_id', 1), ('depth', 0), ('stored_bytes', 0);
 
 -- Every zstd dictionary a row was ever compressed with: rows stay readable after the
 -- packaged dictionary changes.

@@ -78,20 +78,14 @@ class DeadLetterBox:
         where, params = _selection(ids)
         now = self._store.now()
         with self._store.transaction() as cursor:
-            moved = cursor.execute(
-                "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
+            rows = cursor.execute(
                 f"SELECT event_id, ?, codec, dict_id, json_size, body FROM dead_letters {where} "
                 "ORDER BY id",
                 (now, *params),
-            ).rowcount
-            size = cursor.execute(
-                f"SELECT coalesce(sum(length(body)), 0) FROM dead_letters {where}", params
-            ).fetchone()[0]
+            ).fetchall()
+            self._store.insert_rows(cursor, rows, requeued_total=len(rows), dead_letters=-len(rows))
             cursor.execute(f"DELETE FROM dead_letters {where}", params)
-            bump_counters(
-                cursor, depth=moved, stored_bytes=size, requeued_total=moved, dead_letters=-moved
-            )
-        return int(moved)
+        return len(rows)
 
     def purge(self, ids: Sequence[int] | None = None, before: float | None = None) -> int:
         """Delete dead letters: all, ``ids``, or those that died before ``before``."""

@@ -54,12 +54,9 @@ def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection,
         problem = _integrity_problem(path, busy_timeout_s)
         if problem is not None:
             quarantined = quarantine(path, problem)
-    new = not path.exists() or path.stat().st_size == 0
     _create_private(path)
     try:
         connection = connect(path, busy_timeout_s)
-        if new:  # before the first write: lets a drained queue give its pages back
-            connection.execute("PRAGMA auto_vacuum = INCREMENTAL")
         mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
     except sqlite3.Error as exc:
         raise QueueError(f"queue {path}: cannot open ({exc})") from exc

@@ -55,6 +55,7 @@ PAGE_FILL = 1.15  # B-tree pages are not full: bytes on disk per byte stored
 WAL_RESERVE_MAX = 4 * MIB
 RECLAIM_MIN_BYTES = 1 * MIB
 EXPIRE_CHUNK = 1000
+RECHECK_EVERY = 64
 MAX_DROP_ROUNDS = 8
 MEASURE_FOOTPRINT_AFTER = 32  # events, before which the footprint is only estimated
 
@@ -128,6 +129,37 @@ class QueueStats:
 
 
 @dataclass
+class _RoomEstimate:
+    """Whether a put surely fits under the caps without asking SQLite: the last
+    measured usage plus twice what was added since (rows cost more than their bodies)
+    must stay under 90% of each cap, and a fresh measurement is taken every
+    ``RECHECK_EVERY`` puts. Near a cap every put measures."""
+
+    data_cap: int
+    max_events: int | None
+    depth: int = 0
+    used: int = 0
+    puts: int = RECHECK_EVERY  # measure on the first put
+
+    def is_certain(self, events: int, body_bytes: int) -> bool:
+        if self.puts >= RECHECK_EVERY:
+            return False
+        fits_bytes = (
+            self.used + 2 * (body_bytes + ROW_OVERHEAD_BYTES * events) <= 0.9 * self.data_cap
+        )
+        fits_events = self.max_events is None or self.depth + events <= 0.9 * self.max_events
+        return fits_bytes and fits_events
+
+    def added(self, events: int, body_bytes: int) -> None:
+        self.depth += events
+        self.used += 2 * (body_bytes + ROW_OVERHEAD_BYTES * events)
+        self.puts += 1
+
+    def measured(self, depth: int, used: int) -> None:
+        self.depth, self.used, self.puts = depth, used, 0
+
+
+@dataclass
 class _Pending:
     """Drops that could not be written because the disk was full; flushed later."""
 
@@ -159,6 +191,7 @@ class QueueStore:
         self.codecs = Codecs(compression)
         self._page_size = int(self._db.execute("PRAGMA page_size").fetchone()[0])
         self._wal_reserve = min(WAL_RESERVE_MAX, limits.max_bytes // 8)
+        self._room = _RoomEstimate(limits.max_bytes - self._wal_reserve, limits.max_events)
         self._db.execute(f"PRAGMA journal_size_limit = {self._wal_reserve}")
         self._db.execute(
             f"PRAGMA wal_autocheckpoint = {max(16, self._wal_reserve // self._page_size // 2)}"
@@ -297,19 +330,33 @@ class QueueStore:
         now = self._clock()
         with self.transaction() as cursor:
             accepted = self._make_room(cursor, rows)
-            cursor.executemany(
-                "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
-                "VALUES (?, ?, ?, ?, ?, ?)",
-                [(eid, now, e.codec, e.dict_id, size, e.body) for eid, size, e in accepted],
-            )
-            bump_counters(
+            self.insert_rows(
                 cursor,
-                depth=len(accepted),
-                stored_bytes=sum(len(e.body) for _, _, e in accepted),
+                [(eid, now, e.codec, e.dict_id, size, e.body) for eid, size, e in accepted],
                 queued_total=len(accepted),
             )
         self._bound_wal()
         return PutResult(len(accepted), len(rows) - len(accepted))
+
+    @staticmethod
+    def insert_rows(
+        cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **counters: int
+    ) -> None:
+        """Insert (event_id, queued_at, codec, dict_id, json_size, body) rows with ids
+        from next_id, keeping depth and stored_bytes exact, and add ``counters``; in the
+        caller's transaction."""
+        cursor.executemany(
+            "INSERT INTO events(id, event_id, queued_at, codec, dict_id, json_size, body) VALUES "
+            "((SELECT value FROM counters WHERE name = 'next_id') + ?, ?, ?, ?, ?, ?, ?)",
+            [(offset, *row) for offset, row in enumerate(rows)],
+        )
+        bump_counters(
+            cursor,
+            next_id=len(rows),
+            depth=len(rows),
+            stored_bytes=sum(len(r[5]) for r in rows),
+            **counters,
+        )
 
     def _bound_wal(self) -> None:
         """Truncate the WAL once it outgrows its share of the byte cap. (SQLite's
@@ -323,6 +370,18 @@ class QueueStore:
         self, cursor: sqlite3.Cursor, rows: list[tuple[str, int, Encoded]]
     ) -> list[tuple[str, int, Encoded]]:
         """Apply the caps before inserting ``rows``; returns the rows that may go in."""
+        incoming = sum(len(e.body) for _, _, e in rows)
+        if self._room.is_certain(len(rows), incoming):
+            self._room.added(len(rows), incoming)
+            return rows
+        rows = self._make_room_measured(cursor, rows)
+        depth, used = self._depth_and_used_bytes(cursor)
+        self._room.measured(depth + len(rows), used + incoming)
+        return rows
+
+    def _make_room_measured(
+        self, cursor: sqlite3.Cursor, rows: list[tuple[str, int, Encoded]]
+    ) -> list[tuple[str, int, Encoded]]:
         limits = self.limits
         depth, used = self._depth_and_used_bytes(cursor)
         per_event = self._bytes_per_event(rows, depth, used)
@@ -539,19 +598,25 @@ class QueueStore:
         return expired
 
     def reclaim_space(self, force: bool = False) -> int:
-        """Give free pages back to the file system and truncate the WAL, so a drained
-        queue shrinks on disk. Returns bytes given back."""
+        """Give space back to the file system once most of the file is free pages (a
+        backlog has drained): VACUUM then rewrites only the few live rows, which is
+        quick. Free pages of a partly drained queue are left for new events to reuse.
+        Returns bytes given back."""
         before = self.file_bytes()
         with self._lock:
-            free = self._db.execute("PRAGMA freelist_count").fetchone()[0] * self._page_size
-            if not force and free < RECLAIM_MIN_BYTES:
-                return 0
+            pages, free = self._db.execute(
+                "SELECT page_count, freelist_count "
+                "FROM pragma_page_count(), pragma_freelist_count()"
+            ).fetchone()
+            free_bytes = free * self._page_size
+            mostly_free = free_bytes >= RECLAIM_MIN_BYTES and free > pages - free
             try:
-                # execute() would step this pragma once (one page); a script runs it out
-                self._db.executescript("PRAGMA incremental_vacuum;")
+                if force or mostly_free:
+                    self._db.execute("VACUUM")
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
             except sqlite3.Error as exc:
                 raise _queue_error(exc, self.path) from exc
+            self._room.puts = RECHECK_EVERY
         return max(0, before - self.file_bytes())
 
     def maintain(self) -> None:
@@ -620,21 +685,21 @@ class QueueStore:
         )
 
 
-_BUMP = (
-    "INSERT INTO counters(name, value) VALUES (?, ?) "
-    "ON CONFLICT(name) DO UPDATE SET value = value + excluded.value"
-)
-
-
 def bump_counter(cursor: sqlite3.Cursor, name: str, delta: int) -> None:
-    """Add ``delta`` to a counter, inside the caller's transaction."""
-    if delta:
-        cursor.execute(_BUMP, (name, delta))
+    """Add ``delta`` to one counter, inside the caller's transaction."""
+    bump_counters(cursor, **{name: delta})
 
 
 def bump_counters(cursor: sqlite3.Cursor, **deltas: int) -> None:
-    """Add to several counters with one statement execution loop in C."""
-    cursor.executemany(_BUMP, [(name, delta) for name, delta in deltas.items() if delta])
+    """Add to several counters in one statement."""
+    items = [(name, delta) for name, delta in deltas.items() if delta]
+    if items:
+        cursor.execute(
+            "INSERT INTO counters(name, value) VALUES "  # noqa: S608 - only placeholders join
+            + ", ".join("(?, ?)" for _ in items)
+            + " ON CONFLICT(name) DO UPDATE SET value = value + excluded.value",
+            [part for item in items for part in item],
+        )
 
 
 def _queue_error(exc: sqlite3.Error, path: Path) -> QueueError:

@@ -248,11 +248,11 @@ def test_rows_of_a_retired_dictionary_stay_readable(open_store) -> None:
             "INSERT INTO zstd_dictionaries VALUES (?, ?, 0)", (old.dict_id(), old.as_bytes())
         )
         cursor.execute(
-            "INSERT INTO events(event_id, queued_at, codec, dict_id, json_size, body) "
-            "VALUES ('e7', 0, ?, ?, 40, ?)",
+            "INSERT INTO events(id, event_id, queued_at, codec, dict_id, json_size, body) "
+            "VALUES ((SELECT value FROM counters WHERE name = 'next_id'), 'e7', 0, ?, ?, 40, ?)",
             (ZSTD_DICT, old.dict_id(), body),
         )
-        cursor.execute("INSERT INTO counters VALUES ('depth', 1)")
+        cursor.execute("UPDATE counters SET value = value + 1 WHERE name IN ('depth', 'next_id')")
     store.close()
     assert seqs(open_store().claim_batch(1, MIB)) == [7]
 
@@ -383,7 +383,8 @@ def test_a_database_of_the_first_migration_is_upgraded(tmp_path: Path) -> None:
         "VALUES ('e1', 1.0, 0, NULL, 9, ?)",
         (orjson.dumps({"seq": 1}),),
     )
-    old.execute("INSERT INTO counters VALUES ('depth', 1)")
+    old.execute("UPDATE counters SET value = 2 WHERE name = 'next_id'")
+    old.execute("UPDATE counters SET value = 1 WHERE name = 'depth'")
     assert (
         old.execute("SELECT count(*) FROM sqlite_master WHERE name = 'dead_letters'").fetchone()[0]
         == 0
