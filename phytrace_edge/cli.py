@@ -10,9 +10,11 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import orjson
 
@@ -20,17 +22,14 @@ from phytrace_edge import __version__
 from phytrace_edge.config import (
     LoadedSettings,
     Secret,
-    Settings,
     format_bytes,
     setting_infos,
     settings_from_environment,
 )
 from phytrace_edge.errors import PhytraceError
 
-if TYPE_CHECKING:
-    from phytrace_edge.queue import QueueStore
-
 EXIT_BAD_INPUT = 2
+log = logging.getLogger("phytrace_edge")
 Command = Callable[[argparse.Namespace, LoadedSettings], int]
 
 
@@ -94,24 +93,6 @@ def cmd_sim(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     return 0 if stats["events_failed"] == 0 else 1
 
 
-def open_queue(settings: Settings) -> QueueStore:
-    """The queue named by the settings (QUEUE_PATH and the caps)."""
-    from phytrace_edge.queue import QueueLimits, QueueStore
-
-    limits = QueueLimits(
-        max_bytes=settings.queue_max_bytes,
-        max_events=settings.queue_max_events,
-        on_full=settings.queue_on_full,
-        ttl_s=settings.queue_ttl_s,
-    )
-    return QueueStore.open(
-        str(settings.queue_path),
-        limits=limits,
-        compression=settings.queue_compression,
-        sync=settings.queue_sync,
-    )
-
-
 def _when(unix_s: float) -> str:
     from phytrace_edge.udm.event import format_timestamp
 
@@ -121,6 +102,7 @@ def _when(unix_s: float) -> str:
 def cmd_dead_letters(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Inspect, export, requeue or purge events PhyCloud rejected for good."""
     from phytrace_edge.queue.dead_letters import DeadLetterBox
+    from phytrace_edge.runtime.service import open_queue
 
     with open_queue(loaded.settings) as store:
         box = DeadLetterBox(store)
@@ -181,6 +163,28 @@ def cmd_stub(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Run the bridge until SIGTERM or SIGINT; a second signal exits at once."""
+    from phytrace_edge.runtime.service import BridgeService
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        if stop.is_set():
+            os._exit(128 + signum)  # the queue is crash-safe: nothing committed is lost
+        log.info("received %s: stopping (again to exit at once)", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    service = BridgeService(loaded.settings)
+    log.info("%s", service.summary())
+    service.start()
+    stop.wait()
+    service.shutdown(loaded.settings.shutdown_grace_s)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="phytrace-edge",
@@ -188,6 +192,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"phytrace-edge {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run the bridge (ingest, queue, ship) until stopped")
+    run.set_defaults(handler=cmd_run)
 
     config = commands.add_parser("config", help="print the effective settings and their sources")
     config.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -234,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     stub.add_argument("--seed", type=int, help="seed of the fault injection RNG")
     stub.set_defaults(handler=cmd_stub)
 
-    for command in (config, sim, dead):
+    for command in (run, config, sim, dead):
         _setting_flags(command)
     return parser
 
@@ -244,9 +251,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         loaded = settings_from_environment(_flags(args), config_path=getattr(args, "config", None))
-        logging.basicConfig(
-            level=loaded.settings.log_level,
-            format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        from phytrace_edge.runtime.logs import configure_logging
+
+        settings = loaded.settings
+        configure_logging(
+            settings.log_level, settings.log_format, [settings.phycloud_api_key.reveal()]
         )
         handler: Command = args.handler
         return handler(args, loaded)

@@ -49,6 +49,7 @@ DEFAULT_RETRY_MIN_S = 0.5
 DEFAULT_RETRY_MAX_S = 60.0
 DEFAULT_HTTP_TIMEOUT_S = 10.0
 DEFAULT_STALE_AFTER_S = 5.0
+DEFAULT_SHUTDOWN_GRACE_S = 5.0
 CONTAINER_STATE_DIR = Path("/var/lib/phytrace-edge")
 
 
@@ -307,6 +308,9 @@ class Settings:
     retry_min_s: float = setting(DEFAULT_RETRY_MIN_S, positive_float(3600), "first backoff")
     retry_max_s: float = setting(DEFAULT_RETRY_MAX_S, positive_float(86400), "longest backoff")
     http_timeout_s: float = setting(DEFAULT_HTTP_TIMEOUT_S, positive_float(600), "per request")
+    shutdown_grace_s: float = setting(
+        DEFAULT_SHUTDOWN_GRACE_S, positive_float(600), "time to flush at SIGTERM"
+    )
     ca_bundle: str | None = setting(None, optional(existing_file), "extra CA file for TLS")
     upload_max_bps: int | None = setting(
         None, optional(int_between(1, 10**12)), "upload bandwidth cap, bytes/s"

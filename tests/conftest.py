@@ -53,3 +53,25 @@ def non_finite_values(value: Any, path: str = "") -> list[str]:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return [path]
     return []
+
+
+@pytest.fixture
+def stub_factory(tmp_path):
+    """Start real stub processes; every one is killed at teardown."""
+    from tests.processes import StubProcess
+
+    started: list = []
+
+    def start(*args: str, name: str = "stub") -> StubProcess:
+        stub = StubProcess(tmp_path / f"{name}.db", *args).start()
+        started.append(stub)
+        return stub
+
+    yield start
+    for stub in started:
+        stub.stop()
+
+
+@pytest.fixture
+def stub(stub_factory):
+    return stub_factory()

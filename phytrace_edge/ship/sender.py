@@ -100,6 +100,7 @@ class Sender:
         self.transport = transport
         self.policy = policy
         self.stop = stop or threading.Event()
+        self.flushing = threading.Event()  # shutting down: send partial batches at once
         self.stats = SendStats()
         self._clock = clock
         self._rng = rng or random.Random()
@@ -116,7 +117,7 @@ class Sender:
         events arrive."""
         while not self.stop.is_set():
             try:
-                sent = self.send_next_batch()
+                sent = self.send_next_batch(flush=self.flushing.is_set())
             except Stopped:
                 return
             if not sent:

@@ -12,10 +12,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from phytrace_edge.build.builder import Identity, UDMBuilder
 from phytrace_edge.config import Settings
-from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.ros import NodeClock, create_sample_timer, subscribe_topics
+from phytrace_edge.runtime.ros_node import BridgeNode
 from phytrace_edge.sim.mock_ros import Context, SingleThreadedExecutor, init, ros_api, shutdown
 from phytrace_edge.sim.robot import DeliveryRobot
 from phytrace_edge.sim.world import World
@@ -59,18 +57,7 @@ def run_simulation(
         robot = DeliveryRobot(robot_node, World.create(seed), tick_hz=ROBOT_TICK_HZ)
         robot_node.create_timer(1.0 / ROBOT_TICK_HZ, robot.tick, clock=api.clock("steady"))
 
-        bridge_node = api.create_node("phytrace_edge")
-        builder = UDMBuilder(
-            Identity(settings.source_id, settings.source_type, settings.fleet_id, settings.site_id),
-            stale_after_s=settings.stale_after_s,
-            use_sim_time=settings.use_sim_time,
-            clock=NodeClock(api),
-        )
-        dispatcher = Dispatcher(builder.add_reading)
-        subscribe_topics(api, bridge_node, settings.topics, dispatcher)
-
-        def on_tick() -> None:
-            event = builder.build_event()
+        def emit(event: Event) -> None:
             if not check_event(event, log):
                 counts["failed"] += 1
                 return
@@ -82,8 +69,8 @@ def run_simulation(
             else:
                 counts["sent"] += 1
 
-        create_sample_timer(api, bridge_node, settings.sample_rate_hz, on_tick)
-        executor = SingleThreadedExecutor(context, [robot_node, bridge_node])
+        bridge = BridgeNode(api, settings, emit)
+        executor = SingleThreadedExecutor(context, [robot_node, bridge.node])
         while robot.ticks < num_ticks and context.ok():
             executor.spin_once(timeout_sec=1.0)
     finally:
@@ -91,6 +78,6 @@ def run_simulation(
     return {
         "events_sent": counts["sent"],
         "events_failed": counts["failed"],
-        "topics_seen": builder.topics_seen(),
+        "topics_seen": bridge.builder.topics_seen(),
         "duration_s": round(time.monotonic() - started, 3),
     }

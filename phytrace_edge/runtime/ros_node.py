@@ -1,0 +1,46 @@
+"""The phytrace_edge node: topic subscriptions feed the builder, the sample timer emits.
+
+Written against ``RosApi`` so it runs on real rclpy and on the mock layer unchanged;
+``run_simulation`` and ``phytrace-edge run`` both use it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from phytrace_edge.build import Identity, UDMBuilder
+from phytrace_edge.config import Settings
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.ros import NodeClock, RosApi, create_sample_timer, subscribe_topics
+
+NODE_NAME = "phytrace_edge"
+
+
+def identity_of(settings: Settings) -> Identity:
+    return Identity(settings.source_id, settings.source_type, settings.fleet_id, settings.site_id)
+
+
+class BridgeNode:
+    """Subscriptions -> dispatcher -> builder; every 1/SAMPLE_RATE_HZ: ``emit(event)``."""
+
+    def __init__(
+        self, api: RosApi, settings: Settings, emit: Callable[[dict[str, Any]], None]
+    ) -> None:
+        self.node = api.create_node(NODE_NAME)
+        self.builder = UDMBuilder(
+            identity_of(settings),
+            stale_after_s=settings.stale_after_s,
+            use_sim_time=settings.use_sim_time,
+            clock=NodeClock(api),
+        )
+        self.dispatcher = Dispatcher(self.builder.add_reading)
+        self._emit = emit
+        self.events_built = 0
+        self.subscriptions = subscribe_topics(api, self.node, settings.topics, self.dispatcher)
+        self.timer = create_sample_timer(api, self.node, settings.sample_rate_hz, self.tick)
+
+    def tick(self) -> None:
+        event = self.builder.build_event()
+        self.events_built += 1
+        self._emit(event)

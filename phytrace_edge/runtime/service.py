@@ -1,0 +1,125 @@
+"""The bridge as a service: source -> writer -> queue -> sender, and a clean stop.
+
+Threads: the source's executor (ingest and build), the queue writer, the sender and
+the maintenance loop. They share only the queue file and the writer's hand-off, so a
+stalled PhyCloud never slows ingest and a burst of messages never blocks a send.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from urllib.parse import urlsplit
+
+from phytrace_edge import __version__
+from phytrace_edge.config import Settings, format_bytes
+from phytrace_edge.queue import QueueLimits, QueueStore
+from phytrace_edge.runtime.sources import Source, make_source
+from phytrace_edge.runtime.writer import QueueWriter
+from phytrace_edge.ship import HttpTransport, Sender, SendPolicy, Transport
+from phytrace_edge.udm.schema import check_event
+
+log = logging.getLogger(__name__)
+
+MAINTENANCE_EVERY_S = 60.0
+
+
+def open_queue(settings: Settings) -> QueueStore:
+    """The queue named by the settings. The lease outlives the longest retry wait, so a
+    batch that is still being retried is not taken by a second sender."""
+    return QueueStore.open(
+        str(settings.queue_path),
+        limits=QueueLimits(
+            max_bytes=settings.queue_max_bytes,
+            max_events=settings.queue_max_events,
+            on_full=settings.queue_on_full,
+            ttl_s=settings.queue_ttl_s,
+        ),
+        compression=settings.queue_compression,
+        sync=settings.queue_sync,
+        lease_s=max(60.0, 2 * (settings.retry_max_s + settings.http_timeout_s)),
+    )
+
+
+def send_policy(settings: Settings) -> SendPolicy:
+    return SendPolicy(
+        batch_size=settings.batch_size,
+        batch_max_bytes=settings.batch_max_bytes,
+        flush_interval_s=settings.flush_interval_s,
+        retry_min_s=settings.retry_min_s,
+        retry_max_s=settings.retry_max_s,
+        http_compression=settings.http_compression,
+        upload_max_bps=settings.upload_max_bps,
+    )
+
+
+def http_transport(settings: Settings) -> HttpTransport:
+    return HttpTransport(
+        settings.phycloud_endpoint,
+        settings.phycloud_api_key,
+        settings.http_timeout_s,
+        settings.ca_bundle,
+    )
+
+
+class BridgeService:
+    """Start with ``start()``; stop with ``shutdown()``."""
+
+    def __init__(self, settings: Settings, transport: Transport | None = None) -> None:
+        self.settings = settings
+        self.store = open_queue(settings)
+        self.writer = QueueWriter(self.store)
+        self.sender = Sender(
+            self.store, transport or http_transport(settings), send_policy(settings)
+        )
+        self.source: Source = make_source(settings, self._emit)
+        self._stop_maintenance = threading.Event()
+        self._threads = [
+            threading.Thread(target=self.sender.run, name="sender", daemon=True),
+            threading.Thread(target=self._maintain, name="maintenance", daemon=True),
+        ]
+
+    def _emit(self, event: dict) -> None:
+        check_event(event, log)  # a violation is logged; the event is still kept
+        self.writer.put(event)
+
+    def summary(self) -> str:
+        s = self.settings
+        depth = self.store.stats_counter("depth")
+        return (
+            f"phytrace-edge {__version__}: {s.source_id} ({s.source_type}) input {s.bridge_input} "
+            f"at {s.sample_rate_hz:g} Hz -> {urlsplit(s.phycloud_endpoint).netloc}; queue "
+            f"{s.queue_path} ({depth} events, cap {format_bytes(s.queue_max_bytes)})"
+        )
+
+    def start(self) -> None:
+        self.writer.start()
+        for thread in self._threads:
+            thread.start()
+        self.source.start()
+
+    def _maintain(self) -> None:
+        while not self._stop_maintenance.wait(MAINTENANCE_EVERY_S):
+            try:
+                self.store.maintain()
+            except Exception:
+                log.exception("queue maintenance failed; will try again")
+
+    def shutdown(self, grace_s: float) -> None:
+        """Stop ingest, queue what was built, let the sender flush for up to ``grace_s``."""
+        self.source.stop()
+        self.writer.stop()
+        self.sender.flushing.set()
+        deadline = time.monotonic() + grace_s
+        while time.monotonic() < deadline and self.store.stats_counter("depth") > 0:
+            if self.sender.stop.wait(0.05):
+                break
+        self.sender.stop.set()
+        self._stop_maintenance.set()
+        for thread in self._threads:
+            thread.join(timeout=5)
+        self.sender.transport.close()
+        left = self.store.stats_counter("depth")
+        self.store.close()
+        log.info("stopped; %d event(s) left in the queue for next time", left)

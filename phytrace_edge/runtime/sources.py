@@ -1,0 +1,119 @@
+"""Where messages come from: a source runs a ROS executor on its own thread and feeds
+``emit`` one UDM event per sample tick.
+
+- ``sim``: the simulated delivery robot on the mock rclpy layer, in real time.
+- ``ros``: the robot's ROS 2 graph through rclpy (ROS 2 must be sourced).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from phytrace_edge.config import Settings
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.runtime.ros_node import BridgeNode
+
+log = logging.getLogger(__name__)
+
+Emit = Callable[[dict[str, Any]], None]
+SPIN_TIMEOUT_S = 0.1
+
+
+class Source(Protocol):
+    bridge: BridgeNode
+
+    def start(self) -> None: ...
+
+    def stop(self) -> None: ...
+
+
+class _Spinner:
+    """Spins an executor on a thread until stopped."""
+
+    def __init__(self, spin_once: Callable[[float], None], name: str) -> None:
+        self._spin_once = spin_once
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self._spin_once(SPIN_TIMEOUT_S)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+
+class SimSource:
+    """The simulated delivery robot and the bridge node, in real time."""
+
+    def __init__(self, settings: Settings, emit: Emit, seed: int = 0) -> None:
+        from phytrace_edge.sim import mock_ros
+        from phytrace_edge.sim.robot import DeliveryRobot
+        from phytrace_edge.sim.world import World
+
+        self._context = mock_ros.Context()
+        mock_ros.init(context=self._context)
+        api = mock_ros.ros_api(self._context)
+        robot_node = api.create_node("delivery_robot")
+        robot = DeliveryRobot(robot_node, World.create(seed))
+        robot_node.create_timer(1.0 / robot.tick_hz, robot.tick, clock=api.clock("steady"))
+        self.bridge = BridgeNode(api, settings, emit)
+        executor = mock_ros.SingleThreadedExecutor(self._context, [robot_node, self.bridge.node])
+        self._spinner = _Spinner(executor.spin_once, "sim-executor")
+
+    def start(self) -> None:
+        self._spinner.start()
+
+    def stop(self) -> None:
+        self._spinner.stop()
+        from phytrace_edge.sim import mock_ros
+
+        mock_ros.shutdown(context=self._context)
+
+
+class RosSource:
+    """The robot's ROS 2 graph through rclpy."""
+
+    def __init__(self, settings: Settings, emit: Emit) -> None:
+        from phytrace_edge.ingest.ros import load_rclpy
+
+        try:
+            api = load_rclpy()
+            import rclpy
+            from rclpy.executors import SingleThreadedExecutor
+        except ImportError:
+            raise ConfigError(
+                "BRIDGE_INPUT='ros': rclpy is not importable - source ROS 2 first "
+                "(source /opt/ros/jazzy/setup.bash), or use --bridge-input dds, sim or bag:PATH"
+            ) from None
+        self._rclpy = rclpy
+        rclpy.init()
+        self.bridge = BridgeNode(api, settings, emit)
+        executor = SingleThreadedExecutor()
+        executor.add_node(self.bridge.node)
+        self._spinner = _Spinner(lambda t: executor.spin_once(timeout_sec=t), "ros-executor")
+
+    def start(self) -> None:
+        self._spinner.start()
+
+    def stop(self) -> None:
+        self._spinner.stop()
+        self.bridge.node.destroy_node()
+        self._rclpy.try_shutdown()
+
+
+def make_source(settings: Settings, emit: Emit) -> Source:
+    """The source BRIDGE_INPUT names."""
+    kind = settings.bridge_input
+    if kind == "sim":
+        return SimSource(settings, emit)
+    if kind == "ros":
+        return RosSource(settings, emit)
+    raise ConfigError(f"BRIDGE_INPUT={kind!r}: this input is not built yet (use sim or ros)")

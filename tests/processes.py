@@ -1,0 +1,152 @@
+"""Real processes for integration and chaos tests: the stub and the bridge.
+
+Every process binds to 127.0.0.1, is found by its pid and is killed at teardown.
+Waiting is always on a condition with a deadline, never a bare sleep.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def wait_for(condition: Callable[[], Any], timeout: float, what: str, every: float = 0.05) -> Any:
+    """Poll ``condition`` until it returns something truthy; fail after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:.0f} s waiting for {what}")
+        time.sleep(every)
+
+
+def python_env(**extra: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PHYCLOUD_", "QUEUE_"))}
+    env.update(PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1", **extra)
+    return env
+
+
+class StubProcess:
+    """``phytrace-edge stub`` on a free loopback port, restartable on the same port."""
+
+    def __init__(self, db: Path, *args: str) -> None:
+        self.db, self.args = db, args
+        self.port = 0
+        self.process: subprocess.Popen[str] | None = None
+        self.log = db.with_suffix(".log")
+
+    @property
+    def url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    @property
+    def endpoint(self) -> str:
+        return f"{self.url}/api/v1"
+
+    def start(self) -> StubProcess:
+        command = [
+            sys.executable,
+            "-m",
+            "phytrace_edge",
+            "stub",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--db",
+            str(self.db),
+            *self.args,
+        ]
+        with self.log.open("a") as log:
+            self.process = subprocess.Popen(
+                command, stdout=subprocess.PIPE, stderr=log, text=True, env=python_env()
+            )
+        line = self.process.stdout.readline()  # type: ignore[union-attr]
+        match = re.search(r"127\.0\.0\.1:(\d+)", line)
+        if not match:
+            self.stop()
+            raise AssertionError(f"stub did not start: {line!r}; see {self.log}")
+        self.port = int(match.group(1))
+        wait_for(self._healthy, 20, "the stub to answer /healthz")
+        return self
+
+    def _healthy(self) -> bool:
+        try:
+            return httpx.get(f"{self.url}/healthz", timeout=1).status_code == 200
+        except httpx.HTTPError:
+            return False
+
+    def kill(self) -> None:
+        """SIGKILL: no chance to finish anything."""
+        if self.process and self.process.poll() is None:
+            os.kill(self.process.pid, signal.SIGKILL)
+            self.process.wait(timeout=10)
+
+    def stop(self) -> None:
+        if self.process and self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.kill()
+
+    def stats(self) -> dict[str, Any]:
+        return httpx.get(f"{self.endpoint}/stats", timeout=5).json()
+
+    def event_ids(self) -> list[str]:
+        ids, after = [], 0
+        while True:
+            page = httpx.get(
+                f"{self.endpoint}/events", params={"after": after, "limit": 10000}, timeout=30
+            ).json()
+            ids += [event["event_id"] for event in page["events"]]
+            if not page["events"]:
+                return ids
+            after = page["next_after"]
+
+    def set_faults(self, **faults: Any) -> dict[str, Any]:
+        return httpx.put(f"{self.endpoint}/faults", json=faults, timeout=5).json()
+
+
+class BridgeProcess:
+    """``phytrace-edge run`` with settings from the environment."""
+
+    def __init__(self, log: Path, **env: str) -> None:
+        self.env, self.log = env, log
+        self.process: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> BridgeProcess:
+        with self.log.open("a") as log:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "phytrace_edge", "run"],
+                stdout=log,
+                stderr=log,
+                env=python_env(**self.env),
+            )
+        return self
+
+    def signal(self, signum: int) -> None:
+        if self.process and self.process.poll() is None:
+            os.kill(self.process.pid, signum)
+
+    def wait(self, timeout: float) -> int:
+        assert self.process is not None
+        return self.process.wait(timeout=timeout)
+
+    def stop(self) -> None:
+        if self.process and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(timeout=10)
