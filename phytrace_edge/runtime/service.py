@@ -10,6 +10,8 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
 from urllib.parse import urlsplit
 
 from phytrace_edge import __version__
@@ -66,8 +68,15 @@ def http_transport(settings: Settings) -> HttpTransport:
 class BridgeService:
     """Start with ``start()``; stop with ``shutdown()``."""
 
-    def __init__(self, settings: Settings, transport: Transport | None = None) -> None:
+    def __init__(
+        self,
+        settings: Settings,
+        transport: Transport | None = None,
+        on_event: Callable[[dict[str, Any]], None] | None = None,
+    ) -> None:
         self.settings = settings
+        self._on_event = on_event
+        self.events_built = 0
         self.store = open_queue(settings)
         self.writer = QueueWriter(self.store)
         self.sender = Sender(
@@ -80,8 +89,11 @@ class BridgeService:
             threading.Thread(target=self._maintain, name="maintenance", daemon=True),
         ]
 
-    def _emit(self, event: dict) -> None:
+    def _emit(self, event: dict[str, Any]) -> None:
+        self.events_built += 1
         check_event(event, log)  # a violation is logged; the event is still kept
+        if self._on_event is not None:
+            self._on_event(event)
         self.writer.put(event)
 
     def summary(self) -> str:

@@ -26,7 +26,7 @@ from starlette.routing import Route
 from phytrace_edge.stub.board import Board
 from phytrace_edge.stub.faults import Faults, decide
 from phytrace_edge.stub.store import StubStore
-from phytrace_edge.udm.schema import find_violation
+from phytrace_edge.stub.validate import find_violation
 
 log = logging.getLogger(__name__)
 

@@ -1,8 +1,11 @@
 """The UDM 1.0.0 JSON Schema shipped in the package, and its validator.
 
 The schema file is the contract PhyCloud and other languages use; this module compiles
-it once (fastjsonschema generates Python code from it) and reports the first failure
-of an event as the field path and the offending value.
+it once (fastjsonschema generates Python code from it, pure Python, so it installs on
+any robot) and reports the first failure of an event as the field path and the
+offending value. The schema's ``$ref``s are inlined before compiling: each referenced
+definition would otherwise be a generated function that formats its error-path string
+on every call, which made validation 2.5x slower.
 """
 
 from __future__ import annotations
@@ -42,9 +45,26 @@ def load_schema() -> dict[str, Any]:
     return schema
 
 
+def inline_refs(schema: dict[str, Any]) -> dict[str, Any]:
+    """The schema with every local ``#/definitions/x`` reference replaced by its body."""
+    definitions = schema.get("definitions", {})
+
+    def inline(node: Any) -> Any:
+        if isinstance(node, dict):
+            if "$ref" in node:
+                return inline(definitions[node["$ref"].rsplit("/", 1)[-1]])
+            return {key: inline(value) for key, value in node.items() if key != "definitions"}
+        if isinstance(node, list):
+            return [inline(item) for item in node]
+        return node
+
+    inlined: dict[str, Any] = inline(schema)
+    return inlined
+
+
 @functools.cache
 def _compiled() -> Callable[[Any], Any]:
-    return fastjsonschema.compile(load_schema())
+    return fastjsonschema.compile(inline_refs(load_schema()))
 
 
 def find_violation(event: Any) -> SchemaViolation | None:

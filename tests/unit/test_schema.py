@@ -109,3 +109,47 @@ def test_docs_describe_every_field_of_the_schema() -> None:
     schema = load_schema()
     missing = [path for path in _leaf_paths(schema, schema, "") if f"`{path}`" not in doc]
     assert missing == []
+
+
+def test_the_stub_and_the_bridge_agree_on_validity() -> None:
+    """Two validators read the one schema file; random damage must get one verdict."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from phytrace_edge.stub.validate import find_violation as stub_violation
+
+    def leaves(node, path=()):
+        if isinstance(node, dict):
+            for key, value in node.items():
+                yield from leaves(value, (*path, key))
+        elif isinstance(node, list):
+            for index, value in enumerate(node):
+                yield from leaves(value, (*path, index))
+        else:
+            yield path
+
+    paths = list(leaves(REFERENCE_EVENT))
+    values = st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(-1000, 1000),
+        st.floats(-1e6, 1e6),
+        st.text(max_size=300),
+        st.lists(st.integers(), max_size=2),
+        st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+    )
+
+    @settings(max_examples=300, deadline=None)
+    @given(path=st.sampled_from(paths), value=values)
+    def agree(path, value) -> None:
+        event = copy.deepcopy(REFERENCE_EVENT)
+        node = event
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value
+        ours, theirs = find_violation(event), stub_violation(event)
+        assert (ours is None) == (theirs is None), (path, value, ours, theirs)
+        if ours is not None:
+            assert ours.path == theirs.path
+
+    agree()
