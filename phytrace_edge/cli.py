@@ -13,7 +13,9 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import orjson
@@ -29,6 +31,7 @@ from phytrace_edge.config import (
 from phytrace_edge.errors import PhytraceError
 
 EXIT_BAD_INPUT = 2
+WATCHDOG_IDLE_S = 5.0
 log = logging.getLogger("phytrace_edge")
 Command = Callable[[argparse.Namespace, LoadedSettings], int]
 
@@ -165,6 +168,7 @@ def cmd_stub(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
 def cmd_run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Run the bridge until SIGTERM or SIGINT; a second signal exits at once."""
+    from phytrace_edge.runtime.sd_notify import SystemdNotifier
     from phytrace_edge.runtime.service import BridgeService
 
     stop = threading.Event()
@@ -177,12 +181,121 @@ def cmd_run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
+    notifier = SystemdNotifier()
     service = BridgeService(loaded.settings)
     log.info("%s", service.summary())
     service.start()
-    stop.wait()
+    notifier.ready(service.status_line())
+    # feed the watchdog only while every thread of the service is alive
+    interval = notifier.watchdog_s / 2 if notifier.watchdog_s else WATCHDOG_IDLE_S
+    while not stop.wait(interval):
+        if service.alive():
+            notifier.watchdog(service.status_line())
+        else:
+            log.error("a thread of the service died; letting the watchdog restart it")
+    notifier.stopping()
     service.shutdown(loaded.settings.shutdown_grace_s)
     return 0
+
+
+def cmd_status(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running."""
+    from phytrace_edge.runtime.health import Thresholds, exit_code, report
+    from phytrace_edge.runtime.state import read_snapshot
+
+    s = loaded.settings
+    snapshot = read_snapshot(Path(str(s.queue_path)))
+    if snapshot is None:
+        print(
+            f"phytrace-edge: no queue at {s.queue_path}: the bridge never ran with this QUEUE_PATH",
+            file=sys.stderr,
+        )
+        return 3
+    limits = Thresholds(
+        s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
+    )
+    document = report(snapshot, limits, time.time(), str(s.queue_path))
+    if args.json:
+        sys.stdout.write(orjson.dumps(document, option=orjson.OPT_INDENT_2).decode() + "\n")
+    elif not args.quiet:
+        print(render_status(document))
+    return exit_code(document)
+
+
+def render_status(d: dict[str, Any]) -> str:
+    """The status document as a table for people."""
+    state = "HEALTHY" if d["healthy"] else ("UNHEALTHY" if d["problems"] else "NOT RUNNING")
+    service, queue = d["service"], d["queue"]
+    lines = [f"phytrace-edge status: {state}"]
+    if d["heartbeat_age_s"] is None:
+        lines.append("  service      never ran with this queue")
+    else:
+        verb = "running" if d["running"] else "not running"
+        lines.append(
+            f"  service      {verb} (pid {service.get('pid')}, {service.get('version')}, input "
+            f"{service.get('input')}, {service.get('source_id')} -> "
+            f"{service.get('endpoint_host')}), heartbeat {d['heartbeat_age_s']:.1f} s ago"
+        )
+    oldest = "" if queue["oldest_age_s"] is None else f", oldest {queue['oldest_age_s']:.1f} s"
+    lines.append(
+        f"  queue        {queue['depth']} event(s), {format_bytes(queue['bytes'])} of "
+        f"{format_bytes(queue['cap_bytes'])} ({queue['fill']:.0%}){oldest}  {queue['path']}"
+    )
+    lines.append(
+        f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
+        f"success {d['last_success_at'] or 'never'}"
+    )
+    if d["last_error"]:
+        lines.append(f"  last error   {d['last_error']} at {d['last_error_at']}")
+    drops = ", ".join(f"{reason} {n}" for reason, n in d["drops"].items()) or "none"
+    lines.append(f"  drops        {drops}")
+    lines.append(
+        f"  dead letters {d['dead_letters']}"
+        + ("  (phytrace-edge dead-letters list)" if d["dead_letters"] else "")
+    )
+    for topic, t in d["topics"].items():
+        age = t.get("last_seen_age_s")
+        seen = "" if age is None else f", last {age:.1f} s ago"
+        rejected = sum(t.get("rejected", {}).values())
+        lines.append(
+            f"  {topic:<16} {t['rate_hz']:.1f} Hz, {t['received']} received{seen}"
+            + (f", {rejected} rejected" if rejected else "")
+        )
+    lines += [f"  problem: {problem}" for problem in d["problems"]]
+    return "\n".join(lines)
+
+
+def cmd_drain(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Send the whole backlog now; exit 0 only when the queue is empty at the end."""
+    from tqdm import tqdm
+
+    from phytrace_edge.runtime.service import http_transport, open_queue, send_policy
+    from phytrace_edge.ship import Sender
+
+    settings = loaded.settings
+    started = time.monotonic()
+    with open_queue(settings) as store:
+        sender = Sender(store, http_transport(settings), send_policy(settings))
+        signal.signal(signal.SIGINT, lambda signum, frame: sender.stop.set())
+        signal.signal(signal.SIGTERM, lambda signum, frame: sender.stop.set())
+        depth = store.stats_counter("depth")
+        with tqdm(total=depth, unit="ev", desc="draining", file=sys.stderr, disable=None) as bar:
+
+            def progress(sent: int) -> None:
+                bar.update(sent)
+                bar.set_postfix(left=format_bytes(store.stats_counter("stored_bytes")))
+
+            deadline = None if args.timeout is None else started + args.timeout
+            empty = sender.drain(deadline=deadline, progress=progress)
+        left = store.stats_counter("depth")
+        sender.transport.close()
+    elapsed = time.monotonic() - started
+    if empty:
+        print(f"drained {sender.stats.events_sent} event(s) in {elapsed:.1f} s; the queue is empty")
+        return 0
+    why = sender.stats.last_error or ("timeout" if args.timeout else "stopped")
+    print(f"sent {sender.stats.events_sent} event(s) in {elapsed:.1f} s; {left} left ({why})")
+    return 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -195,6 +308,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = commands.add_parser("run", help="run the bridge (ingest, queue, ship) until stopped")
     run.set_defaults(handler=cmd_run)
+
+    status = commands.add_parser(
+        "status", help="show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running"
+    )
+    status.add_argument("--json", action="store_true", help="print JSON (a stable interface)")
+    status.add_argument("--quiet", "-q", action="store_true", help="print nothing: exit code only")
+    status.set_defaults(handler=cmd_status)
+
+    drain = commands.add_parser("drain", help="send the whole backlog now, with a progress bar")
+    drain.add_argument("--timeout", type=float, help="give up after this many seconds")
+    drain.set_defaults(handler=cmd_drain)
 
     config = commands.add_parser("config", help="print the effective settings and their sources")
     config.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -241,7 +365,7 @@ def build_parser() -> argparse.ArgumentParser:
     stub.add_argument("--seed", type=int, help="seed of the fault injection RNG")
     stub.set_defaults(handler=cmd_stub)
 
-    for command in (run, config, sim, dead):
+    for command in (run, status, drain, config, sim, dead):
         _setting_flags(command)
     return parser
 

@@ -325,6 +325,16 @@ class Settings:
         frozenset(), topic_set, "topics not subscribed, /scan,..."
     )
     metrics_port: int = setting(0, int_between(0, 65535), "Prometheus endpoint port, 0 = off")
+    metrics_host: str = setting("127.0.0.1", identifier, "address the metrics endpoint binds")
+    health_stale_s: float = setting(
+        15.0, positive_float(3600), "status: heartbeat older than this means hung or dead"
+    )
+    health_no_progress_s: float = setting(
+        300.0, positive_float(86400), "status: events waiting, nothing sent for this long"
+    )
+    queue_warn_fraction: float = setting(
+        0.8, positive_float(1.0), "status: unhealthy above this fraction of the byte cap"
+    )
     log_level: str = setting(
         "INFO",
         lambda raw: one_of("debug", "info", "warning", "error")(raw).upper(),

@@ -99,7 +99,7 @@ class StubProcess:
         if self.process and self.process.poll() is None:
             self.process.terminate()
             try:
-                self.process.wait(timeout=10)
+                self.process.wait(timeout=3)  # uvicorn waits for requests still in flight
             except subprocess.TimeoutExpired:
                 self.kill()
 

@@ -107,6 +107,15 @@ class UDMBuilder:
             use_sim_time=self._use_sim_time,
         )
 
+    def topic_ages(self) -> dict[str, float]:
+        """Seconds since each topic's latest reading arrived."""
+        now = self._clock.monotonic()
+        with self._lock:
+            return {
+                topic: round(now - latest.received_mono_s, 3)
+                for topic, latest in self._latest.items()
+            }
+
     def topics_seen(self) -> list[str]:
         """Topics that delivered at least one reading, sorted."""
         with self._lock:

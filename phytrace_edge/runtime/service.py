@@ -8,9 +8,11 @@ stalled PhyCloud never slows ingest and a burst of messages never blocks a send.
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -18,6 +20,7 @@ from phytrace_edge import __version__
 from phytrace_edge.config import Settings, format_bytes
 from phytrace_edge.queue import QueueLimits, QueueStore
 from phytrace_edge.runtime.sources import Source, make_source
+from phytrace_edge.runtime.state import HEARTBEAT_S, Rates, service_document, write_state
 from phytrace_edge.runtime.writer import QueueWriter
 from phytrace_edge.ship import HttpTransport, Sender, SendPolicy, Transport
 from phytrace_edge.udm.schema import check_event
@@ -65,6 +68,25 @@ def http_transport(settings: Settings) -> HttpTransport:
     )
 
 
+def warn_if_not_on_a_volume(queue_path: Path, env: Mapping[str, str]) -> bool:
+    """In the container, a queue that is not on a mounted volume dies with the container
+    and takes the backlog with it: say so loudly. True when it warned."""
+    if not env.get("PHYTRACE_CONTAINER"):
+        return False
+    folder = queue_path.resolve().parent
+    if any(os.path.ismount(p) for p in (folder, *folder.parents) if str(p) != "/"):
+        return False
+    log.warning(
+        "!!! the queue %s is not on a mounted volume: the backlog will be lost with the "
+        "container. Mount a volume at %s (docker run -v phytrace-queue:%s, or compose's "
+        "volumes) !!!",
+        queue_path,
+        folder,
+        folder,
+    )
+    return True
+
+
 class BridgeService:
     """Start with ``start()``; stop with ``shutdown()``."""
 
@@ -74,6 +96,7 @@ class BridgeService:
         transport: Transport | None = None,
         on_event: Callable[[dict[str, Any]], None] | None = None,
     ) -> None:
+        warn_if_not_on_a_volume(Path(str(settings.queue_path)), os.environ)
         self.settings = settings
         self._on_event = on_event
         self.events_built = 0
@@ -84,6 +107,9 @@ class BridgeService:
         )
         self.source: Source = make_source(settings, self._emit)
         self._stop_maintenance = threading.Event()
+        self._rates = Rates()
+        self._metrics: Any = None
+        self.started_at = time.time()
         self._threads = [
             threading.Thread(target=self.sender.run, name="sender", daemon=True),
             threading.Thread(target=self._maintain, name="maintenance", daemon=True),
@@ -105,18 +131,86 @@ class BridgeService:
             f"{s.queue_path} ({depth} events, cap {format_bytes(s.queue_max_bytes)})"
         )
 
+    def status_line(self) -> str:
+        """One line for `systemctl status`."""
+        stats = self.sender.stats
+        last = (
+            "never"
+            if stats.last_success_at is None
+            else (f"{time.time() - stats.last_success_at:.0f} s ago")
+        )
+        return (
+            f"{self.store.stats_counter('depth')} queued, {stats.events_sent} sent, "
+            f"last success {last}"
+            + (f", last error {stats.last_error}" if stats.last_error else "")
+        )
+
+    def alive(self) -> bool:
+        """Whether the sender, maintenance and writer threads all still run."""
+        return all(thread.is_alive() for thread in self._threads) and self.writer.alive()
+
     def start(self) -> None:
         self.writer.start()
         for thread in self._threads:
             thread.start()
         self.source.start()
+        self.heartbeat(running=True)
+        if self.settings.metrics_port:
+            from phytrace_edge.runtime.metrics import serve_metrics
+
+            self._metrics = serve_metrics(
+                self, self.settings.metrics_host, self.settings.metrics_port
+            )
 
     def _maintain(self) -> None:
-        while not self._stop_maintenance.wait(MAINTENANCE_EVERY_S):
+        """Heartbeat every HEARTBEAT_S; queue upkeep (TTL, space) every minute."""
+        last_upkeep = time.monotonic()
+        while not self._stop_maintenance.wait(HEARTBEAT_S):
             try:
-                self.store.maintain()
+                self.heartbeat(running=True)
+                if time.monotonic() - last_upkeep >= MAINTENANCE_EVERY_S:
+                    last_upkeep = time.monotonic()
+                    self.store.maintain()
             except Exception:
                 log.exception("queue maintenance failed; will try again")
+
+    def heartbeat(self, running: bool) -> None:
+        """Write the figures `status` shows (another process reads them)."""
+        dispatcher, builder = self.source.bridge.dispatcher, self.source.bridge.builder
+        now = time.time()
+        rates = self._rates.update(
+            {
+                "send": self.sender.stats.events_sent,
+                **{f"topic:{t}": n for t, n in dispatcher.received.items()},
+            },
+            now,
+        )
+        ages = builder.topic_ages()
+        topics = {
+            topic: {
+                "received": received,
+                "rate_hz": rates.get(f"topic:{topic}", 0.0),
+                "last_seen_age_s": ages.get(topic),
+                "rejected": {
+                    reason: n for (t, reason), n in dispatcher.rejected.items() if t == topic
+                },
+            }
+            for topic, received in sorted(dispatcher.received.items())
+        }
+        sender = {**self.sender.stats.as_dict(), "send_rate_eps": rates.get("send", 0.0)}
+        s = self.settings
+        document = service_document(
+            {
+                "input": s.bridge_input,
+                "source_id": s.source_id,
+                "endpoint_host": urlsplit(s.phycloud_endpoint).netloc,
+            },
+            sender,
+            topics,
+            {"events_built": self.events_built, "writer_dropped": self.writer.events_dropped},
+            self.started_at,
+        )
+        write_state(self.store, document, running)
 
     def shutdown(self, grace_s: float) -> None:
         """Stop ingest, queue what was built, let the sender flush for up to ``grace_s``."""
@@ -129,9 +223,12 @@ class BridgeService:
                 break
         self.sender.stop.set()
         self._stop_maintenance.set()
+        if self._metrics is not None:
+            self._metrics.shutdown()
         for thread in self._threads:
             thread.join(timeout=5)
         self.sender.transport.close()
+        self.heartbeat(running=False)
         left = self.store.stats_counter("depth")
         self.store.close()
         log.info("stopped; %d event(s) left in the queue for next time", left)

@@ -62,6 +62,9 @@ class QueueWriter:
         self._wake.set()
         self._thread.join(timeout_s)
 
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
     def backlog(self) -> int:
         with self._lock:
             return len(self._pending)

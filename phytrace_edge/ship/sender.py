@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 
 RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same time spreads
 POLL_INTERVAL_S = 0.25
+LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
 
 
 @dataclass(frozen=True)
@@ -70,11 +71,22 @@ class SendStats:
     last_error: str | None = None
     last_error_at: float | None = None
     last_status: int | None = None
-    send_latencies_s: list[float] = field(default_factory=list)
+    latency_buckets: list[int] = field(default_factory=lambda: [0] * len(LATENCY_BUCKETS_S))
+    latency_count: int = 0
+    latency_sum_s: float = 0.0
+
+    def observe_latency(self, seconds: float) -> None:
+        """Count one request's duration into the cumulative histogram."""
+        self.latency_count += 1
+        self.latency_sum_s += seconds
+        for i, bound in enumerate(LATENCY_BUCKETS_S):
+            if seconds <= bound:
+                self.latency_buckets[i] += 1
 
     def as_dict(self) -> dict[str, Any]:
         data = dict(vars(self))
-        data.pop("send_latencies_s")
+        for key in ("latency_buckets", "latency_count", "latency_sum_s"):
+            data.pop(key)
         return data
 
 
@@ -105,6 +117,7 @@ class Sender:
         self._clock = clock
         self._rng = rng or random.Random()
         self._pause = sleep or self.stop.wait
+        self._deadline: float | None = None
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
         self._backoff = wait_random_exponential(
             multiplier=policy.retry_min_s, max=policy.retry_max_s
@@ -126,19 +139,27 @@ class Sender:
     def drain(
         self, deadline: float | None = None, progress: Callable[[int], None] | None = None
     ) -> bool:
-        """Send everything queued now, partial batches included; True when empty."""
-        while not self.stop.is_set() and (deadline is None or time.monotonic() < deadline):
-            try:
-                sent = self.send_next_batch(flush=True)
-            except Stopped:
-                break
-            if progress is not None and sent:
-                progress(sent)
-            if not sent and self.store.stats_counter("depth") == 0:
-                return True
-            if not sent:
-                self.stop.wait(POLL_INTERVAL_S)  # another process holds what is left
-        return self.store.stats_counter("depth") == 0
+        """Send everything queued now, partial batches included; True when empty. A
+        ``deadline`` (monotonic) also cuts short a batch that is still retrying."""
+        self._deadline = deadline
+        try:
+            while not self.stop.is_set() and not self._past_deadline():
+                try:
+                    sent = self.send_next_batch(flush=True)
+                except Stopped:
+                    break
+                if progress is not None and sent:
+                    progress(sent)
+                if not sent and self.store.stats_counter("depth") == 0:
+                    return True
+                if not sent:
+                    self.stop.wait(POLL_INTERVAL_S)  # another process holds what is left
+            return self.store.stats_counter("depth") == 0
+        finally:
+            self._deadline = None
+
+    def _past_deadline(self) -> bool:
+        return self._deadline is not None and time.monotonic() >= self._deadline
 
     def due(self) -> bool:
         """Whether a batch should go now: a full batch waits, or the oldest event has
@@ -211,8 +232,7 @@ class Sender:
                 started = time.monotonic()
                 reply = self.transport.post_events(encoded, headers)
                 outcome = classify(reply, len(events), self._clock())
-                self.stats.send_latencies_s.append(time.monotonic() - started)
-                del self.stats.send_latencies_s[:-1000]
+                self.stats.observe_latency(time.monotonic() - started)
                 self._record_success(len(events), len(encoded), reply.status)
                 return outcome
         raise AssertionError("tenacity returns or raises")
@@ -228,9 +248,11 @@ class Sender:
         return float(self._backoff(state))
 
     def _sleep(self, seconds: float) -> None:
-        """Sleep, but wake up at once when asked to stop."""
+        """Sleep, but wake up at once when asked to stop or at the drain's deadline."""
+        if self._deadline is not None:
+            seconds = min(seconds, max(0.0, self._deadline - time.monotonic()))
         self._pause(seconds)
-        if self.stop.is_set():
+        if self.stop.is_set() or self._past_deadline():
             raise Stopped
 
     def _before_retry(self, batch: Batch, state: RetryCallState) -> None:

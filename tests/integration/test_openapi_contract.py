@@ -5,6 +5,7 @@ hostile bodies (hypothesis) never get a 5xx or an undocumented status."""
 from __future__ import annotations
 
 import gzip
+import json
 from pathlib import Path
 
 import httpx
@@ -118,7 +119,8 @@ json_values = st.recursive(
 )
 @given(document=json_values, encoding=st.sampled_from(["identity", "gzip", "zstd", "deflate"]))
 def test_hostile_bodies_get_documented_answers(stub, document, encoding: str) -> None:
-    raw = orjson.dumps({"events": document} if isinstance(document, list) else document)
+    # the stdlib encoder also writes integers beyond 64 bits, which orjson cannot read
+    raw = json.dumps({"events": document} if isinstance(document, list) else document).encode()
     body = gzip.compress(raw) if encoding == "gzip" else raw  # zstd/deflate: invalid on purpose
     response = httpx.post(
         f"{stub.endpoint}/events", content=body, headers={"Content-Encoding": encoding}, timeout=10

@@ -22,7 +22,7 @@ from phytrace_edge.errors import QueueBusyError
 from phytrace_edge.queue import DeadLetter, QueueLimits, QueueStore
 from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
 from phytrace_edge.queue.dead_letters import DeadLetterBox
-from phytrace_edge.queue.migrate import migrate
+from phytrace_edge.queue.migrate import migrate, migration_files
 from phytrace_edge.queue.recovery import connect
 
 
@@ -391,7 +391,7 @@ def test_a_database_of_the_first_migration_is_upgraded(tmp_path: Path) -> None:
     )
     old.close()
     store = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB))
-    assert store.read("PRAGMA user_version")[0][0] == 2
+    assert store.read("PRAGMA user_version")[0][0] == len(migration_files())
     batch = store.claim_batch(5, MIB)
     assert seqs(batch) == [1]
     store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 422", 422)])

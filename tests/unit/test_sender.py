@@ -6,6 +6,7 @@ from __future__ import annotations
 import gzip
 import logging
 import threading
+import time
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -302,3 +303,17 @@ def test_plain_http_to_a_remote_host_warns(caplog: pytest.LogCaptureFixture) -> 
         assert caplog.text == ""
         HttpTransport("http://phycloud.example.com/api/v1", Secret("phk_live_secret"), 1).close()
     assert "plain http" in caplog.text and "phk_live_secret" not in caplog.text
+
+
+def test_a_drain_deadline_cuts_short_a_batch_that_keeps_retrying(store) -> None:
+    put(store, 5)
+
+    def down(body, headers):
+        return Reply(503, {}, b"")
+
+    s = Sender(store, FunctionTransport(down), SendPolicy(retry_min_s=0.01, retry_max_s=0.05))
+    started = time.monotonic()
+    assert s.drain(deadline=started + 0.5) is False
+    assert time.monotonic() - started < 5
+    assert store.stats().depth == 5 and store.stats().leased == 0  # released, not lost
+    assert s.stats.retries > 0

