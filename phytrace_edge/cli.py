@@ -162,7 +162,11 @@ def cmd_stub(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     except ValueError as exc:
         print(f"phytrace-edge: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    run_stub(args.host, args.port, args.db, args.api_key, faults, args.seed)
+    if bool(args.tls_cert) != bool(args.tls_key):
+        print("phytrace-edge: error: --tls-cert and --tls-key go together", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    tls = (args.tls_cert, args.tls_key) if args.tls_cert else None
+    run_stub(args.host, args.port, args.db, args.api_key, faults, args.seed, tls)
     return 0
 
 
@@ -363,6 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="answer schema violations with 200 and per-event rejections",
     )
     stub.add_argument("--seed", type=int, help="seed of the fault injection RNG")
+    stub.add_argument("--tls-cert", help="serve https with this certificate (PEM)")
+    stub.add_argument("--tls-key", help="the certificate's private key (PEM)")
     stub.set_defaults(handler=cmd_stub)
 
     for command in (run, status, drain, config, sim, dead):

@@ -45,12 +45,13 @@ class StubProcess:
     def __init__(self, db: Path, *args: str) -> None:
         self.db, self.args = db, args
         self.port = 0
+        self.scheme = "https" if "--tls-cert" in args else "http"
         self.process: subprocess.Popen[str] | None = None
         self.log = db.with_suffix(".log")
 
     @property
     def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
+        return f"{self.scheme}://127.0.0.1:{self.port}"
 
     @property
     def endpoint(self) -> str:
@@ -85,7 +86,7 @@ class StubProcess:
 
     def _healthy(self) -> bool:
         try:
-            return httpx.get(f"{self.url}/healthz", timeout=1).status_code == 200
+            return httpx.get(f"{self.url}/healthz", timeout=1, verify=False).status_code == 200
         except httpx.HTTPError:
             return False
 

@@ -17,7 +17,7 @@ from urllib.parse import urlsplit
 import httpx
 
 from phytrace_edge.config import Secret
-from phytrace_edge.errors import TransientSendError
+from phytrace_edge.errors import EndpointRefusedError, TransientSendError
 from phytrace_edge.ship.responses import Reply
 
 log = logging.getLogger(__name__)
@@ -72,11 +72,27 @@ class HttpTransport:
         except httpx.TimeoutException as exc:
             raise TransientSendError(f"timeout ({type(exc).__name__})") from exc
         except httpx.TransportError as exc:
+            if _untrusted_certificate(exc):
+                raise EndpointRefusedError(
+                    f"TLS: the certificate of {urlsplit(self.url).hostname} is not trusted "
+                    f"({exc}) - set CA_BUNDLE to the CA that signed it"
+                ) from exc
             raise TransientSendError(f"{type(exc).__name__}: {exc}") from exc
         return Reply(response.status_code, dict(response.headers), response.content)
 
     def close(self) -> None:
         self._client.close()
+
+
+def _untrusted_certificate(exc: BaseException) -> bool:
+    """Whether a connection failed because the server's certificate did not verify: a
+    configuration problem to report loudly, not a network blip."""
+    cause: BaseException | None = exc
+    while cause is not None:
+        if isinstance(cause, ssl.SSLCertVerificationError):
+            return True
+        cause = cause.__cause__ or cause.__context__
+    return False
 
 
 class FunctionTransport:

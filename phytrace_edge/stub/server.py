@@ -32,7 +32,13 @@ def bind(host: str, port: int) -> socket.socket:
 
 
 def run_stub(
-    host: str, port: int, db: str | Path, api_key: str | None, faults: Faults, seed: int | None
+    host: str,
+    port: int,
+    db: str | Path,
+    api_key: str | None,
+    faults: Faults,
+    seed: int | None,
+    tls: tuple[str, str] | None = None,
 ) -> None:
     """Serve until interrupted."""
     faults.check()
@@ -41,14 +47,20 @@ def run_stub(
     sock = bind(host, port)
     bound_port = sock.getsockname()[1]
     logging.getLogger("uvicorn.error").addFilter(_HideInjectedDrops())
+    certfile, keyfile = tls or (None, None)
     server = uvicorn.Server(
-        uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+        uvicorn.Config(
+            app,
+            log_level="warning",
+            access_log=False,
+            lifespan="off",
+            ssl_certfile=certfile,
+            ssl_keyfile=keyfile,
+        )
     )
     shown_host = f"[{host}]" if ":" in host else host
-    sys.stdout.write(
-        f"PhyCloud stub listening on http://{shown_host}:{bound_port} "
-        f"(endpoint http://{shown_host}:{bound_port}/api/v1, db {db})\n"
-    )
+    base = f"{'https' if tls else 'http'}://{shown_host}:{bound_port}"
+    sys.stdout.write(f"PhyCloud stub listening on {base} (endpoint {base}/api/v1, db {db})\n")
     sys.stdout.flush()
     try:
         server.run(sockets=[sock])
