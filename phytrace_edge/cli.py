@@ -89,6 +89,12 @@ def cmd_sim(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Run the simulated delivery robot through the bridge and print the stats."""
     from phytrace_edge.sim.runner import run_simulation
 
+    if args.record:
+        from phytrace_edge.sim.recorder import record_simulation
+
+        counts = record_simulation(args.record, args.ticks / 10, args.storage, args.seed)
+        print(f"recorded {sum(counts.values())} messages to {args.record} ({args.storage})")
+        return 0
     stats = run_simulation(
         args.ticks, settings=loaded.settings, seed=args.seed, realtime=args.realtime
     )
@@ -192,13 +198,20 @@ def cmd_run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     notifier.ready(service.status_line())
     # feed the watchdog only while every thread of the service is alive
     interval = notifier.watchdog_s / 2 if notifier.watchdog_s else WATCHDOG_IDLE_S
-    while not stop.wait(interval):
+    while not stop.wait(interval) and not service.source.finished.is_set():
         if service.alive():
             notifier.watchdog(service.status_line())
         else:
             log.error("a thread of the service died; letting the watchdog restart it")
     notifier.stopping()
     service.shutdown(loaded.settings.shutdown_grace_s)
+    summary = getattr(service.source, "summary", None)
+    if summary is not None:  # a replayed bag
+        print(summary.describe())
+        left = service.store_depth_at_stop
+        if left:
+            print(f"{left} event(s) are still queued: phytrace-edge drain sends them now")
+        return 1 if summary.error else 0
     return 0
 
 
@@ -311,6 +324,12 @@ def build_parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="run the bridge (ingest, queue, ship) until stopped")
+    run.add_argument(
+        "--rate",
+        dest="setting_replay_rate",
+        metavar="VALUE",
+        help="bag replay speed, same as --replay-rate",
+    )
     run.set_defaults(handler=cmd_run)
 
     status = commands.add_parser(
@@ -332,6 +351,14 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--ticks", type=int, default=100, help="robot cycles at 10 Hz (default 100)")
     sim.add_argument("--seed", type=int, default=0, help="random seed of the simulated world")
     sim.add_argument("--realtime", action="store_true", help="run at wall-clock pace")
+    sim.add_argument(
+        "--record",
+        metavar="PATH",
+        help="record the robot's topics to a rosbag2 at PATH instead (needs [bag])",
+    )
+    sim.add_argument(
+        "--storage", choices=["mcap", "sqlite3"], default="mcap", help="storage of the recorded bag"
+    )
     sim.set_defaults(handler=cmd_sim)
 
     dead = commands.add_parser(

@@ -111,6 +111,19 @@ def positive_float(upper: float) -> Callable[[Any], float]:
     return parse
 
 
+def non_negative_float(upper: float) -> Callable[[Any], float]:
+    def parse(raw: Any) -> float:
+        try:
+            value = _number(raw, float)
+        except ValueError:
+            value = -1.0
+        if not 0 <= value <= upper:
+            raise ValueError(f"a number from 0 to {upper:g}")
+        return value
+
+    return parse
+
+
 def int_between(lower: int, upper: int) -> Callable[[Any], int]:
     def parse(raw: Any) -> int:
         try:
@@ -279,6 +292,9 @@ class Settings:
     batch_size: int = setting(DEFAULT_BATCH_SIZE, int_between(1, 10_000), "events per request")
     bridge_input: str = setting("ros", bridge_input, "where messages come from")
     use_sim_time: bool = setting(False, boolean, "header stamps follow /clock, not the epoch")
+    replay_rate: float = setting(
+        1.0, non_negative_float(1000), "bag replay speed: 1 = recorded, 0 = as fast as possible"
+    )
     queue_path: str | None = setting(None, optional(path_value), "queue database file")
     queue_max_bytes: int = setting(
         DEFAULT_QUEUE_MAX_BYTES, byte_size(1 * MIB), "byte cap of the queue (WAL included)"

@@ -16,15 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from phytrace_edge.sim import recorder
 from phytrace_edge.sim.mock_ros.messages import Message
 
 FLAVOURS = ("rclpy", "rosbags", "dds")
-
-
-def _rosbags_store() -> Any:
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_JAZZY)
 
 
 _STORE: Any = None
@@ -33,21 +28,10 @@ _STORE: Any = None
 def to_rosbags(msg: Message) -> Any:
     global _STORE
     if _STORE is None:
-        _STORE = _rosbags_store()
-    cls = _STORE.types[msg._type]
-    return cls(**{name: _rosbags_value(getattr(msg, name)) for name in msg._fields_and_field_types})
+        from rosbags.typesys import Stores, get_typestore
 
-
-def _rosbags_value(value: Any) -> Any:
-    if isinstance(value, Message):
-        return to_rosbags(value)
-    if isinstance(value, bytes):
-        return value[0]
-    if isinstance(value, array.array):
-        return np.array(value, dtype=np.float32 if value.typecode == "f" else np.float64)
-    if isinstance(value, list):
-        return [_rosbags_value(item) for item in value]
-    return value
+        _STORE = get_typestore(Stores.ROS2_JAZZY)
+    return recorder.to_rosbags(msg, _STORE)
 
 
 def to_dds(msg: Any) -> Any:

@@ -30,6 +30,11 @@ class TopicSpec:
     domains: tuple[str, ...]
     every_message: bool = False
     latched: bool = False
+    also_types: tuple[str, ...] = ()  # other types the handler reads on this topic
+
+    @property
+    def type_names(self) -> tuple[str, ...]:
+        return (self.type_name, *self.also_types)
 
 
 TOPICS: tuple[TopicSpec, ...] = (
@@ -39,7 +44,13 @@ TOPICS: tuple[TopicSpec, ...] = (
     ),
     TopicSpec("/scan", "sensor_msgs/msg/LaserScan", handlers.handle_laser_scan, ("perception",)),
     TopicSpec("/imu/data", "sensor_msgs/msg/Imu", handlers.handle_imu, ("perception", "motion")),
-    TopicSpec("/cmd_vel", "geometry_msgs/msg/Twist", handlers.handle_twist, ("motion",)),
+    TopicSpec(
+        "/cmd_vel",
+        "geometry_msgs/msg/Twist",
+        handlers.handle_twist,
+        ("motion",),
+        also_types=("geometry_msgs/msg/TwistStamped",),  # what Jazzy's nav2 publishes
+    ),
     TopicSpec(
         "/gps/fix",
         "sensor_msgs/msg/NavSatFix",

@@ -109,6 +109,7 @@ class BridgeService:
         self._stop_maintenance = threading.Event()
         self._rates = Rates()
         self._metrics: Any = None
+        self.store_depth_at_stop = 0
         self.started_at = time.time()
         self._threads = [
             threading.Thread(target=self.sender.run, name="sender", daemon=True),
@@ -229,6 +230,6 @@ class BridgeService:
             thread.join(timeout=5)
         self.sender.transport.close()
         self.heartbeat(running=False)
-        left = self.store.stats_counter("depth")
+        left = self.store_depth_at_stop = self.store.stats_counter("depth")
         self.store.close()
         log.info("stopped; %d event(s) left in the queue for next time", left)

@@ -3,6 +3,8 @@
 
 - ``sim``: the simulated delivery robot on the mock rclpy layer, in real time.
 - ``ros``: the robot's ROS 2 graph through rclpy (ROS 2 must be sourced).
+- ``bag:PATH``: a recorded bag, replayed on its own timeline; the source finishes at
+  the end of the bag.
 """
 
 from __future__ import annotations
@@ -10,11 +12,14 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol
 
+from phytrace_edge.build import UDMBuilder
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import ConfigError
-from phytrace_edge.runtime.ros_node import BridgeNode
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.runtime.ros_node import BridgeNode, identity_of
 
 log = logging.getLogger(__name__)
 
@@ -22,8 +27,24 @@ Emit = Callable[[dict[str, Any]], None]
 SPIN_TIMEOUT_S = 0.1
 
 
+class Ingest(Protocol):
+    """What the service reads from a source for status and metrics."""
+
+    @property
+    def builder(self) -> UDMBuilder: ...
+
+    @property
+    def dispatcher(self) -> Dispatcher: ...
+
+
 class Source(Protocol):
-    bridge: BridgeNode
+    @property
+    def bridge(self) -> Ingest: ...
+
+    @property
+    def finished(self) -> threading.Event:
+        """Set when a finite source (a bag) has nothing more to give."""
+        ...
 
     def start(self) -> None: ...
 
@@ -53,6 +74,8 @@ class _Spinner:
 class SimSource:
     """The simulated delivery robot and the bridge node, in real time."""
 
+    finished = threading.Event()  # never set: the robot runs until stopped
+
     def __init__(self, settings: Settings, emit: Emit, seed: int = 0) -> None:
         from phytrace_edge.sim import mock_ros
         from phytrace_edge.sim.robot import DeliveryRobot
@@ -80,6 +103,8 @@ class SimSource:
 
 class RosSource:
     """The robot's ROS 2 graph through rclpy."""
+
+    finished = threading.Event()  # never set
 
     def __init__(self, settings: Settings, emit: Emit) -> None:
         from phytrace_edge.ingest.ros import load_rclpy
@@ -109,6 +134,62 @@ class RosSource:
         self._rclpy.try_shutdown()
 
 
+@dataclass
+class BagIngest:
+    builder: UDMBuilder
+    dispatcher: Dispatcher
+
+
+class BagSource:
+    """A recorded bag through the handlers and the builder, on the bag's timeline."""
+
+    def __init__(self, settings: Settings, emit: Emit) -> None:
+        from phytrace_edge.ingest.bag import BagClock, open_reader
+
+        self.path = settings.bridge_input.removeprefix("bag:")
+        open_reader(self.path).close()  # a missing or unreadable bag fails at start
+        self._settings = settings
+        self._clock = BagClock()
+        builder = UDMBuilder(
+            identity_of(settings),
+            stale_after_s=settings.stale_after_s,
+            use_sim_time=settings.use_sim_time,
+            clock=self._clock,
+        )
+        self.bridge = BagIngest(builder, Dispatcher(builder.add_reading))
+        self._emit = emit
+        self._stop = threading.Event()
+        self.finished = threading.Event()
+        self.summary: Any = None
+        self._thread = threading.Thread(target=self._replay, name="bag-replay", daemon=True)
+
+    def _replay(self) -> None:
+        from phytrace_edge.ingest.bag import replay
+
+        s = self._settings
+        try:
+            self.summary = replay(
+                self.path,
+                s.topics,
+                self.bridge.dispatcher.on_message,
+                lambda at: self._emit(self.bridge.builder.build_event(captured_at_s=at)),
+                self._clock,
+                s.sample_rate_hz,
+                s.replay_rate,
+                self._stop,
+            )
+            log.info("%s", self.summary.describe())
+        finally:
+            self.finished.set()
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+
+
 def make_source(settings: Settings, emit: Emit) -> Source:
     """The source BRIDGE_INPUT names."""
     kind = settings.bridge_input
@@ -116,4 +197,6 @@ def make_source(settings: Settings, emit: Emit) -> Source:
         return SimSource(settings, emit)
     if kind == "ros":
         return RosSource(settings, emit)
-    raise ConfigError(f"BRIDGE_INPUT={kind!r}: this input is not built yet (use sim or ros)")
+    if kind.startswith("bag:"):
+        return BagSource(settings, emit)
+    raise ConfigError(f"BRIDGE_INPUT={kind!r}: this input is not built yet (use sim, ros or bag:)")

@@ -170,3 +170,14 @@ def test_parameters_from_overrides(context: mock_ros.Context) -> None:
     )
     assert node.declare_parameter("source_id", "default").value == "bot-3"
     assert node.declare_parameter("fleet_id", "f").value == "f"
+
+
+def test_float32_fields_arrive_rounded_like_through_the_middleware(context) -> None:
+    node = mock_ros.create_node("n", context=context)
+    received: list = []
+    publisher = node.create_publisher(m.LaserScan, "/scan", 10)
+    node.create_subscription(m.LaserScan, "/scan", received.append, 10)
+    publisher.publish(m.LaserScan(range_min=0.12, angle_increment=0.1))
+    _spin_until_idle(context, node)
+    assert received[0].range_min == pytest.approx(0.12) and received[0].range_min != 0.12
+    assert received[0].range_min == float(np.float32(0.12))

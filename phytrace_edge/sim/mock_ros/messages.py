@@ -17,6 +17,7 @@ from __future__ import annotations
 import array
 import math
 import re
+import struct
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -336,6 +337,28 @@ DiagnosticArray = _message(
     "diagnostic_msgs/msg/DiagnosticArray",
     {"header": "std_msgs/Header", "status": "sequence<diagnostic_msgs/DiagnosticStatus>"},
 )
+
+
+def wire_copy(msg: Message) -> Message:
+    """``msg`` as a subscriber receives it: a separate object whose float32 fields went
+    through the middleware's float32 (0.12 arrives as 0.11999999731779099), as with
+    real rclpy; every other value is copied exactly."""
+    copy = type(msg).__new__(type(msg))
+    for name, kind in msg._fields_and_field_types.items():
+        object.__setattr__(copy, name, _wire_value(kind, getattr(msg, name)))
+    return copy
+
+
+def _wire_value(kind: str, value: Any) -> Any:
+    if kind == "float":
+        return struct.unpack("f", struct.pack("f", value))[0]
+    if isinstance(value, Message):
+        return wire_copy(value)
+    if isinstance(value, list):
+        return [wire_copy(item) if isinstance(item, Message) else item for item in value]
+    if isinstance(value, (array.array, np.ndarray)):
+        return value.copy() if isinstance(value, np.ndarray) else array.array(value.typecode, value)
+    return value
 
 
 def message_type(type_name: str) -> type[Message]:

@@ -32,6 +32,7 @@ from phytrace_edge.sim.mock_ros.clock import (
     TimeSource,
     VirtualTimeSource,
 )
+from phytrace_edge.sim.mock_ros.messages import Message, wire_copy
 from phytrace_edge.sim.mock_ros.qos import (
     QoSPolicyKind,
     QoSProfile,
@@ -110,12 +111,12 @@ class TopicEndpointInfo:
     qos_profile: QoSProfile
 
 
-def _type_name(msg_type: type) -> str:
-    return msg_type._type  # type: ignore[attr-defined]
+def _type_name(msg_type: type[Message]) -> str:
+    return msg_type._type
 
 
 class Publisher:
-    def __init__(self, node: Node, msg_type: type, topic: str, qos: QoSProfile) -> None:
+    def __init__(self, node: Node, msg_type: type[Message], topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
         self._history: deque[Any] = deque(maxlen=qos.depth)
 
@@ -125,7 +126,7 @@ class Publisher:
         context = self.node.context
         with context.condition:
             if self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self._history.append(copy.deepcopy(msg))
+                self._history.append(wire_copy(msg))
             for subscription in context.subscriptions:
                 if subscription.matches_topic(self):
                     subscription.offer(self, msg)
@@ -145,7 +146,7 @@ class Subscription:
     def __init__(
         self,
         node: Node,
-        msg_type: type,
+        msg_type: type[Message],
         topic: str,
         callback: Callable[[Any], None],
         qos: QoSProfile,
@@ -172,7 +173,7 @@ class Subscription:
         if policy is not None:
             self._note_incompatible(publisher, policy)
             return
-        self.pending.append(copy.deepcopy(msg))
+        self.pending.append(wire_copy(msg))
 
     def _note_incompatible(self, publisher: Publisher, policy: QoSPolicyKind) -> None:
         if id(publisher) in self._incompatible_with:
@@ -193,7 +194,7 @@ class Subscription:
             if policy is not None:
                 self._note_incompatible(publisher, policy)
             elif self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self.pending.extend(copy.deepcopy(m) for m in publisher._history)
+                self.pending.extend(wire_copy(m) for m in publisher._history)
 
 
 class Timer:
@@ -296,7 +297,7 @@ class Node:
         return name in self._parameters
 
     def create_publisher(
-        self, msg_type: type, topic: str, qos_profile: QoSProfile | int
+        self, msg_type: type[Message], topic: str, qos_profile: QoSProfile | int
     ) -> Publisher:
         publisher = Publisher(self, msg_type, topic, as_profile(qos_profile))
         with self.context.condition:
@@ -309,7 +310,7 @@ class Node:
 
     def create_subscription(
         self,
-        msg_type: type,
+        msg_type: type[Message],
         topic: str,
         callback: Callable[[Any], None],
         qos_profile: QoSProfile | int,
