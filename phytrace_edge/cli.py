@@ -25,6 +25,7 @@ from phytrace_edge.config import (
     LoadedSettings,
     Secret,
     format_bytes,
+    ros_parameters,
     setting_infos,
     settings_from_environment,
 )
@@ -192,7 +193,7 @@ def cmd_run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
     notifier = SystemdNotifier()
-    service = BridgeService(loaded.settings)
+    service = BridgeService(loaded.settings, ros_args=args.ros_args)
     log.info("%s", service.summary())
     service.start()
     notifier.ready(service.status_line())
@@ -405,9 +406,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``phytrace-edge`` console script."""
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    # everything from --ros-args on is for ROS: parameters here, the rest for rclpy
+    split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    args = build_parser().parse_args(argv[:split])
+    args.ros_args = argv[split:]
+    ros_args = args.ros_args[1:]
     try:
-        loaded = settings_from_environment(_flags(args), config_path=getattr(args, "config", None))
+        loaded = settings_from_environment(
+            _flags(args),
+            config_path=getattr(args, "config", None),
+            ros_params=ros_parameters(ros_args),
+        )
         from phytrace_edge.runtime.logs import configure_logging
 
         settings = loaded.settings

@@ -14,6 +14,7 @@ through as an empty string when the operator did not set it.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import re
@@ -25,6 +26,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.ros import QosChoice
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 if sys.version_info >= (3, 11):
@@ -257,6 +259,36 @@ def topic_remap(raw: Any) -> dict[str, str]:
     return remap
 
 
+def topic_qos(raw: Any) -> dict[str, QosChoice]:
+    """``/scan=best_effort,/goal_pose=reliable:transient_local`` -> per-topic QoS."""
+    allowed = (
+        "topic=reliability[:durability] pairs for known topics, reliability "
+        "reliable or best_effort, durability volatile or transient_local"
+    )
+    pairs = raw.items() if isinstance(raw, dict) else (p.split("=", 1) for p in _topic_list(raw))
+    choices = {}
+    for pair in pairs:
+        if len(pair) != 2:
+            raise ValueError(allowed)
+        topic, text = (str(part).strip() for part in pair)
+        reliability, _, durability = text.partition(":")
+        if (
+            topic not in KNOWN_TOPICS
+            or reliability not in ("reliable", "best_effort")
+            or durability not in ("", "volatile", "transient_local")
+        ):
+            raise ValueError(allowed)
+        choices[topic] = QosChoice(reliability == "reliable", durability == "transient_local")
+    return choices
+
+
+def namespace(raw: Any) -> str:
+    value = str(raw).strip().rstrip("/")
+    if not re.fullmatch(r"(/[A-Za-z][A-Za-z0-9_]*)+", value):
+        raise ValueError("a ROS namespace like /robot1")
+    return value
+
+
 def topic_set(raw: Any) -> frozenset[str]:
     topics = _topic_list(raw)
     if any(topic not in KNOWN_TOPICS for topic in topics):
@@ -340,6 +372,12 @@ class Settings:
     topics_disabled: frozenset[str] = setting(
         frozenset(), topic_set, "topics not subscribed, /scan,..."
     )
+    topic_namespace: str | None = setting(
+        None, optional(namespace), "prefix of the topic names, e.g. /robot1"
+    )
+    topic_qos: dict[str, QosChoice] = setting(
+        None, optional(topic_qos), "per-topic QoS instead of matching, /scan=best_effort,..."
+    )
     metrics_port: int = setting(0, int_between(0, 65535), "Prometheus endpoint port, 0 = off")
     metrics_host: str = setting("127.0.0.1", identifier, "address the metrics endpoint binds")
     health_stale_s: float = setting(
@@ -360,9 +398,11 @@ class Settings:
 
     @property
     def topics(self) -> dict[str, str]:
-        """Enabled topics: canonical name -> name subscribed on the robot."""
+        """Enabled topics: canonical name -> name subscribed on the robot (a remap wins
+        over the namespace)."""
         remap = self.topic_remap or {}
-        return {t: remap.get(t, t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
+        prefix = self.topic_namespace or ""
+        return {t: remap.get(t, prefix + t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
 
 
 @dataclass(frozen=True)
@@ -506,10 +546,22 @@ def settings_from_environment(
     flags: Mapping[str, Any] | None = None,
     env: Mapping[str, str] | None = None,
     config_path: str | None = None,
+    ros_params: Mapping[str, Any] | None = None,
 ) -> LoadedSettings:
-    """Load settings the way the CLI does: flags, ``os.environ``, and the config file
-    named by ``--config`` or ``PHYTRACE_CONFIG``."""
+    """Load settings the way the CLI does: flags, ``os.environ``, the config file named
+    by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
     env = dict(os.environ) if env is None else env
     path = config_path or env.get("PHYTRACE_CONFIG") or None
     file_values = read_config_file(path) if path else {}
-    return load_settings(flags, env, file_values, file_label=f"config file {path}")
+    return load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")
+
+
+def ros_parameters(ros_args: list[str]) -> dict[str, str]:
+    """``-p name:=value`` pairs of ROS arguments (as ``ros2 run`` and launch files pass
+    them after ``--ros-args``); other ROS arguments (remaps, log levels) are rclpy's."""
+    params = {}
+    for flag, value in itertools.pairwise(ros_args):
+        if flag in ("-p", "--param") and ":=" in value:
+            name, _, text = value.partition(":=")
+            params[name.strip()] = text.strip().strip("'\"")
+    return params

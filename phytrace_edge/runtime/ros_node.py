@@ -12,9 +12,10 @@ from typing import Any
 from phytrace_edge.build import Identity, UDMBuilder
 from phytrace_edge.config import Settings
 from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.ros import NodeClock, RosApi, create_sample_timer, subscribe_topics
+from phytrace_edge.ingest.ros import NodeClock, RosApi, TopicSubscriber, create_sample_timer
 
 NODE_NAME = "phytrace_edge"
+GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
 
 
 def identity_of(settings: Settings) -> Identity:
@@ -37,8 +38,18 @@ class BridgeNode:
         self.dispatcher = Dispatcher(self.builder.add_reading)
         self._emit = emit
         self.events_built = 0
-        self.subscriptions = subscribe_topics(api, self.node, settings.topics, self.dispatcher)
+        self.subscriber = TopicSubscriber(
+            api, self.node, settings.topics, self.dispatcher, settings.topic_qos
+        )
+        self.subscriber.refresh()
+        self.graph_timer = self.node.create_timer(
+            GRAPH_CHECK_S, self.subscriber.refresh, clock=api.clock("steady")
+        )
         self.timer = create_sample_timer(api, self.node, settings.sample_rate_hz, self.tick)
+
+    @property
+    def qos_incompatible(self) -> dict[str, int]:
+        return dict(self.subscriber.qos_incompatible)
 
     def tick(self) -> None:
         event = self.builder.build_event()

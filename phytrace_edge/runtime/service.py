@@ -95,6 +95,7 @@ class BridgeService:
         settings: Settings,
         transport: Transport | None = None,
         on_event: Callable[[dict[str, Any]], None] | None = None,
+        ros_args: list[str] | None = None,
     ) -> None:
         warn_if_not_on_a_volume(Path(str(settings.queue_path)), os.environ)
         self.settings = settings
@@ -105,7 +106,7 @@ class BridgeService:
         self.sender = Sender(
             self.store, transport or http_transport(settings), send_policy(settings)
         )
-        self.source: Source = make_source(settings, self._emit)
+        self.source: Source = make_source(settings, self._emit, ros_args or [])
         self._stop_maintenance = threading.Event()
         self._rates = Rates()
         self._metrics: Any = None

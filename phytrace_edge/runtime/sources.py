@@ -106,7 +106,7 @@ class RosSource:
 
     finished = threading.Event()  # never set
 
-    def __init__(self, settings: Settings, emit: Emit) -> None:
+    def __init__(self, settings: Settings, emit: Emit, ros_args: list[str]) -> None:
         from phytrace_edge.ingest.ros import load_rclpy
 
         try:
@@ -119,7 +119,7 @@ class RosSource:
                 "(source /opt/ros/jazzy/setup.bash), or use --bridge-input dds, sim or bag:PATH"
             ) from None
         self._rclpy = rclpy
-        rclpy.init()
+        rclpy.init(args=["phytrace-edge", *ros_args])  # remaps, log levels, ...
         self.bridge = BridgeNode(api, settings, emit)
         executor = SingleThreadedExecutor()
         executor.add_node(self.bridge.node)
@@ -190,13 +190,13 @@ class BagSource:
         self._thread.join(timeout=10)
 
 
-def make_source(settings: Settings, emit: Emit) -> Source:
-    """The source BRIDGE_INPUT names."""
+def make_source(settings: Settings, emit: Emit, ros_args: list[str]) -> Source:
+    """The source BRIDGE_INPUT names; ``ros_args`` (``--ros-args ...``) go to rclpy."""
     kind = settings.bridge_input
     if kind == "sim":
         return SimSource(settings, emit)
     if kind == "ros":
-        return RosSource(settings, emit)
+        return RosSource(settings, emit, ros_args)
     if kind.startswith("bag:"):
         return BagSource(settings, emit)
     raise ConfigError(f"BRIDGE_INPUT={kind!r}: this input is not built yet (use sim, ros or bag:)")

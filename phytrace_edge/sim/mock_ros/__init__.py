@@ -16,6 +16,7 @@ from phytrace_edge.sim.mock_ros.runtime import (
     Context,
     Node,
     SingleThreadedExecutor,
+    SubscriptionEventCallbacks,
     create_node,
     init,
     ok,
@@ -35,7 +36,13 @@ def ros_api(context: Context) -> RosApi:
         kind_type = ClockType.STEADY_TIME if kind == "steady" else ClockType.SYSTEM_TIME
         return Clock(clock_type=kind_type, source=context.time_source)
 
-    return RosApi(make_node, message_type, qos, make_clock)
+    return RosApi(
+        make_node,
+        message_type,
+        qos,
+        make_clock,
+        lambda on_incompatible: SubscriptionEventCallbacks(incompatible_qos=on_incompatible),
+    )
 
 
 __all__ = [

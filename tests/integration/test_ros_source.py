@@ -1,0 +1,192 @@
+"""The rclpy source, run on the mock rclpy layer (which models QoS compatibility):
+late topics, QoS matching and re-matching, latched topics, overrides, remapping,
+namespaces and ROS parameters."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from phytrace_edge.cli import main
+from phytrace_edge.config import load_settings
+from phytrace_edge.runtime.ros_node import GRAPH_CHECK_S, BridgeNode
+from phytrace_edge.sim import mock_ros
+from phytrace_edge.sim.mock_ros import messages as m
+from phytrace_edge.sim.mock_ros.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+BEST_EFFORT = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+
+
+class Graph:
+    """A virtual-time ROS graph with the bridge node on it."""
+
+    def __init__(self, **env: str) -> None:
+        self.context = mock_ros.Context(virtual_time=True)
+        mock_ros.init(context=self.context)
+        self.api = mock_ros.ros_api(self.context)
+        self.robot = self.api.create_node("robot")
+        self.events: list[dict] = []
+        self.bridge = BridgeNode(self.api, load_settings(env=env).settings, self.events.append)
+        self.executor = mock_ros.SingleThreadedExecutor(
+            self.context, [self.robot, self.bridge.node]
+        )
+
+    def run(self, seconds: float) -> None:
+        end = self.context.time_source.steady_ns() + int(seconds * 1e9)
+        while self.context.time_source.steady_ns() < end:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def received(self, topic: str) -> int:
+        return self.bridge.dispatcher.received[topic]
+
+    def subscription(self, topic: str):
+        return self.bridge.subscriber.subscribed.get(topic)
+
+    def close(self) -> None:
+        mock_ros.shutdown(context=self.context)
+
+
+@pytest.fixture
+def graph():
+    graphs: list[Graph] = []
+
+    def make(**env: str) -> Graph:
+        graphs.append(Graph(**env))
+        return graphs[-1]
+
+    yield make
+    for g in graphs:
+        g.close()
+
+
+def odom(x: float) -> m.Odometry:
+    msg = m.Odometry()
+    msg.pose.pose.position = m.Point(x=x, y=0.0, z=0.0)
+    return msg
+
+
+def test_a_topic_that_appears_later_is_picked_up(graph) -> None:
+    g = graph()
+    assert g.subscription("/odom") is None  # absent topics are skipped
+    g.run(1.0)
+    publisher = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    assert g.subscription("/odom") is not None
+    publisher.publish(odom(4.0))
+    g.run(0.5)
+    assert g.received("/odom") == 1
+    assert g.events[-1]["location"]["local"]["x_m"] == 4.0
+
+
+def test_a_best_effort_sensor_is_heard(graph) -> None:
+    g = graph()
+    g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT).publish(m.LaserScan())
+    g.run(GRAPH_CHECK_S + 0.1)
+    _, choice, _ = g.subscription("/scan")
+    assert (choice.reliable, choice.transient_local) == (False, False)
+
+
+def test_a_new_incompatible_publisher_gets_the_subscription_recreated(graph) -> None:
+    g = graph()
+    reliable = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
+    g.run(GRAPH_CHECK_S + 0.1)
+    first, choice, _ = g.subscription("/diagnostics")
+    assert choice.reliable
+    best_effort = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    second, choice, _ = g.subscription("/diagnostics")
+    assert second is not first and not choice.reliable
+    reliable.publish(m.DiagnosticArray())
+    best_effort.publish(m.DiagnosticArray())
+    g.run(0.5)
+    assert g.received("/diagnostics") == 2  # both publishers are heard
+
+
+def test_a_latched_goal_published_before_the_bridge_is_received(graph) -> None:
+    g = graph()
+    publisher = g.robot.create_publisher(m.PoseStamped, "/goal_pose", LATCHED)
+    goal = m.PoseStamped()
+    goal.pose.position = m.Point(x=45.0, y=22.0, z=0.0)
+    publisher.publish(goal)
+    g.run(GRAPH_CHECK_S + 0.5)
+    _, choice, _ = g.subscription("/goal_pose")
+    assert choice.transient_local and choice.reliable
+    assert g.events[-1]["navigation"]["goal"]["x_m"] == 45.0
+
+
+def test_an_override_that_cannot_match_is_counted(graph) -> None:
+    g = graph(TOPIC_QOS="/scan=reliable")
+    publisher = g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    publisher.publish(m.LaserScan())
+    g.run(0.5)
+    assert g.received("/scan") == 0
+    assert g.bridge.qos_incompatible == {"/scan": 1}
+
+
+def test_remap_disable_and_namespace(graph) -> None:
+    g = graph(
+        TOPIC_REMAP="/odom=/wheel/odom", TOPICS_DISABLED="/gps/fix", TOPIC_NAMESPACE="/robot1"
+    )
+    wheel = g.robot.create_publisher(m.Odometry, "/wheel/odom", BEST_EFFORT)
+    scan = g.robot.create_publisher(m.LaserScan, "/robot1/scan", BEST_EFFORT)
+    unprefixed = g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
+    gps = g.robot.create_publisher(m.NavSatFix, "/robot1/gps/fix", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    wheel.publish(odom(1.5))
+    scan.publish(m.LaserScan(range_min=0.1, range_max=10.0, ranges=[2.0]))
+    unprefixed.publish(m.LaserScan(range_min=0.1, range_max=10.0, ranges=[9.0]))
+    gps.publish(m.NavSatFix(latitude=1.0, longitude=1.0))
+    g.run(0.5)
+    assert g.received("/odom") == 1 and g.received("/scan") == 1
+    assert g.subscription("/gps/fix") is None and g.received("/gps/fix") == 0
+    event = g.events[-1]
+    assert event["location"]["local"]["x_m"] == 1.5
+    assert math.isclose(event["perception"]["lidar"][0]["closest_range_m"], 2.0)
+
+
+def test_a_publisher_of_another_type_is_ignored(graph) -> None:
+    g = graph()
+    g.robot.create_publisher(m.String, "/odom", BEST_EFFORT).publish(m.String(data="x"))
+    g.run(GRAPH_CHECK_S + 0.1)
+    assert g.subscription("/odom") is None
+
+
+def test_twist_stamped_on_cmd_vel(graph) -> None:
+    g = graph()
+    publisher = g.robot.create_publisher(m.TwistStamped, "/cmd_vel", RELIABLE)
+    g.run(GRAPH_CHECK_S + 0.1)
+    msg = m.TwistStamped()
+    msg.twist.linear = m.Vector3(x=0.7, y=0.0, z=0.0)
+    publisher.publish(msg)
+    g.run(0.5)
+    assert g.events[-1]["motion"]["commanded_velocity"]["linear_x_mps"] == 0.7
+
+
+def test_ros_parameters_are_a_settings_source(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SOURCE_ID", "from-env")
+    assert (
+        main(
+            [
+                "config",
+                "--ros-args",
+                "-p",
+                "sample_rate_hz:=10.0",
+                "-p",
+                "source_id:=from-param",
+                "-r",
+                "__ns:=/robot1",
+            ]
+        )
+        == 0
+    )
+    rows = {line.split()[0]: line.split()[1:] for line in capsys.readouterr().out.splitlines()}
+    assert rows["SAMPLE_RATE_HZ"] == ["10.0", "ros", "param"]
+    assert rows["SOURCE_ID"] == ["from-env", "env", "SOURCE_ID"]  # env outranks a ROS param
