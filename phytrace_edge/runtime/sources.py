@@ -135,7 +135,9 @@ class RosSource:
 
 
 @dataclass
-class BagIngest:
+class Ingested:
+    """The builder and dispatcher of a source without a ROS node (bag, DDS)."""
+
     builder: UDMBuilder
     dispatcher: Dispatcher
 
@@ -156,7 +158,7 @@ class BagSource:
             use_sim_time=settings.use_sim_time,
             clock=self._clock,
         )
-        self.bridge = BagIngest(builder, Dispatcher(builder.add_reading))
+        self.bridge = Ingested(builder, Dispatcher(builder.add_reading))
         self._emit = emit
         self._stop = threading.Event()
         self.finished = threading.Event()
@@ -190,6 +192,46 @@ class BagSource:
         self._thread.join(timeout=10)
 
 
+class DdsSource:
+    """A ROS 2 robot heard over Cyclone DDS, without ROS; events at SAMPLE_RATE_HZ."""
+
+    finished = threading.Event()  # never set
+
+    def __init__(self, settings: Settings, emit: Emit) -> None:
+        import os
+
+        from phytrace_edge.ingest.dds import DdsReaders
+
+        builder = UDMBuilder(
+            identity_of(settings),
+            stale_after_s=settings.stale_after_s,
+            use_sim_time=settings.use_sim_time,
+        )
+        self.bridge = Ingested(builder, Dispatcher(builder.add_reading))
+        self._readers = DdsReaders(settings.topics, self.bridge.dispatcher.on_message, os.environ)
+        self._period = 1.0 / settings.sample_rate_hz
+        self._emit = emit
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._tick, name="dds-sampler", daemon=True)
+
+    def _tick(self) -> None:
+        """One event per period on the monotonic clock, without drift."""
+        import time
+
+        next_at = time.monotonic() + self._period
+        while not self._stop.wait(max(0.0, next_at - time.monotonic())):
+            self._emit(self.bridge.builder.build_event())
+            next_at += self._period
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self._readers.close()
+
+
 def make_source(settings: Settings, emit: Emit, ros_args: list[str]) -> Source:
     """The source BRIDGE_INPUT names; ``ros_args`` (``--ros-args ...``) go to rclpy."""
     kind = settings.bridge_input
@@ -197,6 +239,8 @@ def make_source(settings: Settings, emit: Emit, ros_args: list[str]) -> Source:
         return SimSource(settings, emit)
     if kind == "ros":
         return RosSource(settings, emit, ros_args)
+    if kind == "dds":
+        return DdsSource(settings, emit)
     if kind.startswith("bag:"):
         return BagSource(settings, emit)
-    raise ConfigError(f"BRIDGE_INPUT={kind!r}: this input is not built yet (use sim, ros or bag:)")
+    raise ConfigError(f"BRIDGE_INPUT={kind!r}: must be ros, dds, sim or bag:PATH")

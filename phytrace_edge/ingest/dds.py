@@ -1,0 +1,97 @@
+"""The ROS-free input (``BRIDGE_INPUT=dds``): hear a ROS 2 robot over Cyclone DDS
+without ROS installed (the ``dds`` extra, PyPI ``cyclonedds``).
+
+It reads ROS 2's own environment so it lands on the same DDS domain as the robot:
+``ROS_DOMAIN_ID`` picks the domain, and ``ROS_LOCALHOST_ONLY=1`` or
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` confine it to loopback, as rmw_cyclonedds
+does (a participant with Cyclone's defaults would see nothing of a localhost-only
+robot). Readers are best effort and volatile: they match reliable and best-effort
+writers alike (a reliable reader would get nothing from a best-effort sensor); a
+latched message published before the bridge started is not received.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from phytrace_edge.ingest.topics import TOPIC_BY_NAME
+
+log = logging.getLogger(__name__)
+
+READER_DEPTH = 100
+LOCALHOST_CONFIG = (
+    "<CycloneDDS><Domain id='any'><General><Interfaces>"
+    "<NetworkInterface address='127.0.0.1'/></Interfaces>"
+    "<AllowMulticast>false</AllowMulticast></General>"
+    "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+    "<MaxAutoParticipantIndex>64</MaxAutoParticipantIndex>"
+    "<Peers><Peer address='localhost'/></Peers></Discovery></Domain></CycloneDDS>"
+)
+
+
+def domain_settings(env: Mapping[str, str]) -> tuple[int, str | None]:
+    """(domain id, Cyclone configuration) from ROS 2's environment variables."""
+    domain = int(env.get("ROS_DOMAIN_ID") or 0)
+    localhost = env.get("ROS_LOCALHOST_ONLY") == "1" or (
+        env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST"
+    )
+    return domain, LOCALHOST_CONFIG if localhost else None
+
+
+def dds_topic_name(ros_topic: str) -> str:
+    """ROS 2's DDS name of a topic: ``/odom`` -> ``rt/odom``."""
+    return "rt" + ros_topic
+
+
+class DdsReaders:
+    """One best-effort reader per enabled topic; samples go to ``on_message`` on
+    Cyclone's listener thread."""
+
+    def __init__(
+        self, topics: dict[str, str], on_message: Callable[[str, Any], None], env: Mapping[str, str]
+    ) -> None:
+        try:
+            from cyclonedds.core import Listener, Policy, Qos
+            from cyclonedds.domain import Domain, DomainParticipant
+            from cyclonedds.sub import DataReader
+            from cyclonedds.topic import Topic
+
+            from phytrace_edge.ingest.dds_types import DDS_TYPES
+        except ImportError:
+            from phytrace_edge.errors import ConfigError
+
+            raise ConfigError(
+                "BRIDGE_INPUT=dds: needs cyclonedds (pip install 'phytrace-edge[dds]')"
+            ) from None
+        domain_id, config = domain_settings(env)
+        self._domain = Domain(domain_id, config) if config else None
+        self.participant: Any = DomainParticipant(domain_id)
+        qos = Qos(
+            Policy.Reliability.BestEffort,
+            Policy.Durability.Volatile,
+            Policy.History.KeepLast(READER_DEPTH),
+        )
+        self.readers = []
+        for canonical, actual in topics.items():
+            # one type per DDS topic name: /cmd_vel is read as Twist, not TwistStamped
+            idl = DDS_TYPES[TOPIC_BY_NAME[canonical].type_name]
+            topic = Topic(self.participant, dds_topic_name(actual), idl)
+
+            def deliver(reader: Any, name: str = canonical) -> None:
+                for sample in reader.take(N=READER_DEPTH):
+                    on_message(name, sample)
+
+            listener = Listener(on_data_available=deliver)
+            self.readers.append(DataReader(self.participant, topic, qos=qos, listener=listener))
+        log.info(
+            "DDS: domain %d%s, %d readers",
+            domain_id,
+            " (localhost only)" if config else "",
+            len(self.readers),
+        )
+
+    def close(self) -> None:
+        self.readers.clear()
+        self.participant = None
