@@ -563,5 +563,7 @@ def ros_parameters(ros_args: list[str]) -> dict[str, str]:
     for flag, value in itertools.pairwise(ros_args):
         if flag in ("-p", "--param") and ":=" in value:
             name, _, text = value.partition(":=")
-            params[name.strip()] = text.strip().strip("'\"")
+            text = text.strip().strip("'\"")
+            if text:  # a launch argument left empty is not set
+                params[name.strip()] = text
     return params

@@ -1,0 +1,34 @@
+"""phytrace-edge with the simulated delivery robot (no robot needed):
+
+    ros2 launch delivery_robot.launch.py phycloud_endpoint:=http://localhost:8000/api/v1 \
+        source_id:=sim-robot-1
+
+The simulated robot runs inside the bridge process on the mock ROS layer, so this works
+on a machine with or without a ROS graph. The arguments are those of bridge_only.launch.py.
+"""
+
+import importlib.util
+from pathlib import Path
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, ExecuteProcess
+
+_spec = importlib.util.spec_from_file_location(
+    "bridge_only", Path(__file__).with_name("bridge_only.launch.py")
+)
+bridge_only = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bridge_only)
+
+
+def generate_launch_description() -> LaunchDescription:
+    return LaunchDescription(
+        [
+            *(
+                DeclareLaunchArgument(name, default_value=default, description=doc)
+                for name, (default, doc) in bridge_only.ARGUMENTS.items()
+            ),
+            ExecuteProcess(
+                cmd=bridge_only.bridge_command("sim"), output="screen", sigterm_timeout="20"
+            ),
+        ]
+    )

@@ -1,0 +1,81 @@
+"""The launch files, run against a recording stand-in for ROS 2's `launch` package (ROS
+is not installable here): their arguments are the reference guide's, and the command
+they build gives the bridge those values as ROS parameters."""
+
+from __future__ import annotations
+
+import runpy
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+from phytrace_edge.config import ros_parameters, settings_from_environment
+
+LAUNCH = Path(__file__).parents[2] / "phytrace_edge" / "launch"
+REFERENCE = {
+    "phycloud_endpoint",
+    "phycloud_api_key",
+    "source_id",
+    "source_type",
+    "fleet_id",
+    "site_id",
+    "sample_rate_hz",
+    "batch_size",
+}
+
+
+class Recorded:
+    def __init__(self, *args, **kwargs) -> None:
+        self.args, self.kwargs = args, kwargs
+
+
+class LaunchConfiguration(Recorded):
+    pass
+
+
+@pytest.fixture
+def fake_launch(monkeypatch: pytest.MonkeyPatch) -> None:
+    modules = {
+        "launch": types.SimpleNamespace(LaunchDescription=Recorded),
+        "launch.actions": types.SimpleNamespace(
+            DeclareLaunchArgument=Recorded, ExecuteProcess=Recorded
+        ),
+        "launch.substitutions": types.SimpleNamespace(LaunchConfiguration=LaunchConfiguration),
+    }
+    for name, module in modules.items():
+        monkeypatch.setitem(sys.modules, name, module)
+
+
+def resolve(part, values: dict[str, str]) -> str:
+    if isinstance(part, LaunchConfiguration):
+        return values[part.args[0]]
+    if isinstance(part, list):
+        return "".join(resolve(p, values) for p in part)
+    return part
+
+
+@pytest.mark.parametrize(
+    ("file", "bridge_input"),
+    [("bridge_only.launch.py", "ros"), ("delivery_robot.launch.py", "sim")],
+)
+def test_launch_files_pass_the_reference_parameters(
+    fake_launch, file: str, bridge_input: str
+) -> None:
+    description = runpy.run_path(str(LAUNCH / file))["generate_launch_description"]()
+    actions = description.args[0]
+    declared = {
+        a.args[0]: a.kwargs["default_value"] for a in actions if "default_value" in a.kwargs
+    }
+    assert set(declared) == REFERENCE
+    (process,) = [a for a in actions if "cmd" in a.kwargs]
+    values = {**declared, "source_id": "launched-bot", "sample_rate_hz": "10.0"}
+    command = [resolve(part, values) for part in process.kwargs["cmd"]]
+    assert command[:4] == ["phytrace-edge", "run", "--bridge-input", bridge_input]
+    ros_args = command[command.index("--ros-args") + 1 :]
+    loaded = settings_from_environment(env={}, ros_params=ros_parameters(ros_args))
+    assert loaded.settings.source_id == "launched-bot"
+    assert loaded.settings.sample_rate_hz == 10.0
+    assert loaded.origins["source_id"] == "ros param"
+    assert loaded.origins["fleet_id"] == "default"  # left empty: not set
