@@ -8,6 +8,12 @@ does (a participant with Cyclone's defaults would see nothing of a localhost-onl
 robot). Readers are best effort and volatile: they match reliable and best-effort
 writers alike (a reliable reader would get nothing from a best-effort sensor); a
 latched message published before the bridge started is not received.
+
+State topics (odometry, IMU, scan, ...) publish far faster than events are built and
+only their latest value counts: their readers keep one sample, in Cyclone's C cache,
+and ``take_latest`` deserialises it at the sample tick, so Python touches at most one
+message per topic per tick instead of every message (an IMU at 200 Hz). Topics where
+every message counts (diagnostics, goals, delivery status) are delivered as they come.
 """
 
 from __future__ import annotations
@@ -68,29 +74,44 @@ class DdsReaders:
         domain_id, config = domain_settings(env)
         self._domain = Domain(domain_id, config) if config else None
         self.participant: Any = DomainParticipant(domain_id)
-        qos = Qos(
-            Policy.Reliability.BestEffort,
-            Policy.Durability.Volatile,
-            Policy.History.KeepLast(READER_DEPTH),
-        )
-        self.readers = []
+        self._on_message = on_message
+        self.readers: list[Any] = []
+        self.latest_readers: list[tuple[str, Any]] = []
         for canonical, actual in topics.items():
+            spec = TOPIC_BY_NAME[canonical]
             # one type per DDS topic name: /cmd_vel is read as Twist, not TwistStamped
-            idl = DDS_TYPES[TOPIC_BY_NAME[canonical].type_name]
-            topic = Topic(self.participant, dds_topic_name(actual), idl)
+            topic = Topic(self.participant, dds_topic_name(actual), DDS_TYPES[spec.type_name])
+            depth = READER_DEPTH if spec.every_message else 1
+            qos = Qos(
+                Policy.Reliability.BestEffort,
+                Policy.Durability.Volatile,
+                Policy.History.KeepLast(depth),
+            )
+            if spec.every_message:
 
-            def deliver(reader: Any, name: str = canonical) -> None:
-                for sample in reader.take(N=READER_DEPTH):
-                    on_message(name, sample)
+                def deliver(reader: Any, name: str = canonical) -> None:
+                    for sample in reader.take(N=READER_DEPTH):
+                        on_message(name, sample)
 
-            listener = Listener(on_data_available=deliver)
-            self.readers.append(DataReader(self.participant, topic, qos=qos, listener=listener))
+                reader = DataReader(
+                    self.participant, topic, qos=qos, listener=Listener(on_data_available=deliver)
+                )
+            else:
+                reader = DataReader(self.participant, topic, qos=qos)
+                self.latest_readers.append((canonical, reader))
+            self.readers.append(reader)
         log.info(
             "DDS: domain %d%s, %d readers",
             domain_id,
             " (localhost only)" if config else "",
             len(self.readers),
         )
+
+    def take_latest(self) -> None:
+        """Hand over the newest sample of each state topic, if one came since last time."""
+        for name, reader in self.latest_readers:
+            for sample in reader.take(N=1):
+                self._on_message(name, sample)
 
     def close(self) -> None:
         self.readers.clear()

@@ -220,6 +220,7 @@ class DdsSource:
 
         next_at = time.monotonic() + self._period
         while not self._stop.wait(max(0.0, next_at - time.monotonic())):
+            self._readers.take_latest()  # the newest sample of each state topic
             self._emit(self.bridge.builder.build_event())
             next_at += self._period
 
