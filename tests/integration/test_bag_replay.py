@@ -19,6 +19,7 @@ from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.sim import run_simulation
 from phytrace_edge.sim.recorder import CUSTOM_TOPIC, record_simulation
 from phytrace_edge.udm import find_violation
+from tests.conftest import DOMAINS
 from tests.processes import python_env
 
 pytest.importorskip("rosbags", reason="bag replay needs rosbags (pip install .[bag])")
@@ -56,16 +57,7 @@ def replay_events(path: Path, rate: float = 0) -> tuple[list[dict], object]:
 def comparable(event: dict) -> dict:
     """The values an event carries, without ids, times and ages."""
     out = {}
-    for domain in (
-        "location",
-        "motion",
-        "power",
-        "operational",
-        "navigation",
-        "perception",
-        "actuators",
-        "payload",
-    ):
+    for domain in DOMAINS:
         body = {
             k: v
             for k, v in event.get(domain, {}).items()

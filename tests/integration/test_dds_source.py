@@ -21,6 +21,7 @@ from phytrace_edge.ingest import dds_types
 from phytrace_edge.ingest.dds import domain_settings
 from phytrace_edge.runtime.sources import DdsSource
 from phytrace_edge.udm import find_violation
+from tests.conftest import DOMAINS
 from tests.processes import python_env, wait_for
 
 PUBLISHER = str(Path(__file__).with_name("dds_publisher.py"))
@@ -100,16 +101,7 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
         settings = load_settings(env={"SAMPLE_RATE_HZ": "10"}).settings
         source = DdsSource(settings, events.append)
         source.start()
-        wanted = {
-            "location",
-            "motion",
-            "power",
-            "operational",
-            "navigation",
-            "perception",
-            "actuators",
-            "payload",
-        }
+        wanted = set(DOMAINS)
         event = wait_for(
             lambda: next((e for e in reversed(events) if wanted <= set(e)), None),
             60,

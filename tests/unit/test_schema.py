@@ -11,6 +11,7 @@ import pytest
 
 from phytrace_edge.udm import check_event, find_violation, load_schema
 from phytrace_edge.udm.event import format_timestamp, new_event_id
+from tests.conftest import DOMAINS
 
 REFERENCE_EVENT = json.loads(
     (Path(__file__).parent.parent / "data/reference_event.json").read_text()
@@ -23,16 +24,7 @@ def test_reference_guide_example_event_validates() -> None:
 
 def test_schema_covers_every_domain_of_the_reference_event() -> None:
     properties = load_schema()["properties"]
-    for domain in (
-        "location",
-        "motion",
-        "power",
-        "operational",
-        "navigation",
-        "perception",
-        "actuators",
-        "payload",
-    ):
+    for domain in DOMAINS:
         assert domain in REFERENCE_EVENT
         assert domain in properties
 
