@@ -111,12 +111,19 @@ def main() -> int:
             stdout=stub_log,
             stderr=stub_log,
             cwd=ROOT,
+            start_new_session=True,  # Ctrl-C reaches only the demo, which stops them in order
         )
         bridge = None
         try:
             wait_until_up(url, stub)
+            # its own session too: a second signal would make it exit without flushing
             bridge = subprocess.Popen(
-                [python, "-m", "phytrace_edge", "run"], stdout=log, stderr=log, env=env, cwd=ROOT
+                [python, "-m", "phytrace_edge", "run"],
+                stdout=log,
+                stderr=log,
+                env=env,
+                cwd=ROOT,
+                start_new_session=True,
             )
             print(f"PhyCloud stub: {url}/  (open it to watch the robot)")
             print(f"bridge: simulated robot -> queue {STATE / 'queue.db'} -> {url}/api/v1")

@@ -10,7 +10,9 @@
 from __future__ import annotations
 
 import logging
+import os
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -74,9 +76,8 @@ class _Spinner:
 class SimSource:
     """The simulated delivery robot and the bridge node, in real time."""
 
-    finished = threading.Event()  # never set: the robot runs until stopped
-
     def __init__(self, settings: Settings, emit: Emit, seed: int = 0) -> None:
+        self.finished = threading.Event()  # never set: the robot runs until stopped
         from phytrace_edge.sim import mock_ros
         from phytrace_edge.sim.robot import DeliveryRobot
         from phytrace_edge.sim.world import World
@@ -104,9 +105,8 @@ class SimSource:
 class RosSource:
     """The robot's ROS 2 graph through rclpy."""
 
-    finished = threading.Event()  # never set
-
     def __init__(self, settings: Settings, emit: Emit, ros_args: list[str]) -> None:
+        self.finished = threading.Event()  # never set: the robot runs until stopped
         from phytrace_edge.ingest.ros import load_rclpy
 
         try:
@@ -195,13 +195,10 @@ class BagSource:
 class DdsSource:
     """A ROS 2 robot heard over Cyclone DDS, without ROS; events at SAMPLE_RATE_HZ."""
 
-    finished = threading.Event()  # never set
-
     def __init__(self, settings: Settings, emit: Emit) -> None:
-        import os
-
         from phytrace_edge.ingest.dds import DdsReaders
 
+        self.finished = threading.Event()  # never set: the robot runs until stopped
         builder = UDMBuilder(
             identity_of(settings),
             stale_after_s=settings.stale_after_s,
@@ -216,8 +213,6 @@ class DdsSource:
 
     def _tick(self) -> None:
         """One event per period on the monotonic clock, without drift."""
-        import time
-
         next_at = time.monotonic() + self._period
         while not self._stop.wait(max(0.0, next_at - time.monotonic())):
             self._readers.take_latest()  # the newest sample of each state topic

@@ -29,3 +29,36 @@ def test_demo_runs_the_robot_through_the_bridge_to_the_stub() -> None:
     assert final, result.stdout
     queued, delivered, stored = (int(n) for n in final.groups())
     assert queued > 0 and queued == delivered <= stored
+
+
+def test_ctrl_c_stops_the_demo_cleanly() -> None:
+    import os
+    import signal
+
+    from tests.processes import wait_for
+
+    demo = subprocess.Popen(
+        [sys.executable, "tools/demo.py", "--here", "--port", "0"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+    lines: list[str] = []
+    try:
+        wait_for(
+            lambda: lines.append(demo.stdout.readline()) or "healthy" in lines[-1],
+            60,
+            "the demo to show a healthy bridge",
+        )
+        os.killpg(demo.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+        out, _ = demo.communicate(timeout=60)
+    finally:
+        if demo.poll() is None:
+            os.killpg(demo.pid, signal.SIGKILL)
+            demo.wait()
+    assert demo.returncode == 0, "".join(lines) + out
+    assert re.search(
+        r"stopped: \d+ events queued in total, \d+ delivered, 0 left in the queue", out
+    ), out
