@@ -14,7 +14,7 @@ import sqlite3
 import time
 from pathlib import Path
 
-from phytrace_edge.errors import QueueBusyError, QueueError
+from phytrace_edge.errors import QueueBusyError, QueueError, QueueFullError
 
 log = logging.getLogger(__name__)
 
@@ -114,3 +114,14 @@ def _create_private(path: Path) -> None:
     descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o600)
     os.close(descriptor)
     path.chmod(0o600)
+
+
+def queue_error(exc: sqlite3.Error, path: Path) -> QueueError:
+    """Map a SQLite error to the queue error type that says what to do about it."""
+    code = sqlite_code(exc)
+    text = str(exc)
+    if code == SQLITE_FULL:
+        return QueueFullError(f"queue {path}: disk full - free space or lower QUEUE_MAX_BYTES")
+    if code in (SQLITE_BUSY, SQLITE_LOCKED):
+        return QueueBusyError(f"queue {path}: locked by another process past the busy timeout")
+    return QueueError(f"queue {path}: {text}")

@@ -33,17 +33,19 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.config import DEFAULT_QUEUE_TTL_S, MIB, format_bytes
-from phytrace_edge.errors import QueueBusyError, QueueError, QueueFullError
+from phytrace_edge.config import MIB, format_bytes
+from phytrace_edge.errors import QueueError, QueueFullError
 from phytrace_edge.queue.codecs import Codecs, Encoded, packaged_dictionary
 from phytrace_edge.queue.migrate import migrate
-from phytrace_edge.queue.recovery import (
-    SQLITE_BUSY,
-    SQLITE_FULL,
-    SQLITE_LOCKED,
-    open_checked,
-    sqlite_code,
+from phytrace_edge.queue.records import (
+    Batch,
+    DeadLetter,
+    PutResult,
+    QueuedEvent,
+    QueueLimits,
+    QueueStats,
 )
+from phytrace_edge.queue.recovery import open_checked, queue_error
 
 log = logging.getLogger(__name__)
 
@@ -58,74 +60,6 @@ EXPIRE_CHUNK = 1000
 RECHECK_EVERY = 64
 MAX_DROP_ROUNDS = 8
 MEASURE_FOOTPRINT_AFTER = 32  # events, before which the footprint is only estimated
-
-
-@dataclass(frozen=True)
-class QueueLimits:
-    """Caps and policies (QUEUE_MAX_BYTES, QUEUE_MAX_EVENTS, QUEUE_ON_FULL, QUEUE_TTL_S)."""
-
-    max_bytes: int
-    max_events: int | None = None
-    on_full: str = "drop_oldest"
-    ttl_s: float = DEFAULT_QUEUE_TTL_S
-
-
-@dataclass(frozen=True)
-class QueuedEvent:
-    """One event as the sender gets it: its row id, UDM event_id and JSON."""
-
-    id: int
-    event_id: str
-    json: bytes
-
-
-@dataclass(frozen=True)
-class Batch:
-    """Events claimed under one lease: rows ``first_id..last_id``, oldest first."""
-
-    first_id: int
-    last_id: int
-    owner: str
-    events: list[QueuedEvent]
-
-    @property
-    def json_bytes(self) -> int:
-        return sum(len(event.json) for event in self.events)
-
-
-@dataclass(frozen=True)
-class PutResult:
-    accepted: int
-    dropped: int
-
-
-@dataclass(frozen=True)
-class DeadLetter:
-    """An event of a batch that PhyCloud rejected for good, and why."""
-
-    queue_id: int
-    reason: str
-    status_code: int | None = None
-    response: str | None = None
-
-
-@dataclass(frozen=True)
-class QueueStats:
-    """What ``status`` shows about the queue; cheap to read while the bridge writes."""
-
-    path: str
-    depth: int
-    stored_bytes: int
-    file_bytes: int
-    oldest_queued_at: float | None
-    newest_queued_at: float | None
-    drops: dict[str, int]
-    dead_letters: int
-    queued_total: int
-    acked_total: int
-    leased: int
-    max_bytes: int = 0
-    quarantined: str | None = None
 
 
 @dataclass
@@ -277,7 +211,7 @@ class QueueStore:
                 if self._db.in_transaction:
                     self._db.rollback()
                 if isinstance(exc, sqlite3.Error):
-                    raise _queue_error(exc, self.path) from exc
+                    raise queue_error(exc, self.path) from exc
                 raise
 
     def read(self, sql: str, params: Sequence[Any] = ()) -> list[Any]:
@@ -286,7 +220,7 @@ class QueueStore:
             try:
                 return self._db.execute(sql, params).fetchall()
             except sqlite3.Error as exc:
-                raise _queue_error(exc, self.path) from exc
+                raise queue_error(exc, self.path) from exc
 
     def _flush_pending(self, cursor: sqlite3.Cursor) -> None:
         for reason, count in self._pending.drops.items():
@@ -615,7 +549,7 @@ class QueueStore:
                     self._db.execute("VACUUM")
                 self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
             except sqlite3.Error as exc:
-                raise _queue_error(exc, self.path) from exc
+                raise queue_error(exc, self.path) from exc
             self._room.puts = RECHECK_EVERY
         return max(0, before - self.file_bytes())
 
@@ -700,14 +634,3 @@ def bump_counters(cursor: sqlite3.Cursor, **deltas: int) -> None:
             + " ON CONFLICT(name) DO UPDATE SET value = value + excluded.value",
             [part for item in items for part in item],
         )
-
-
-def _queue_error(exc: sqlite3.Error, path: Path) -> QueueError:
-    """Map a SQLite error to the queue error type that says what to do about it."""
-    code = sqlite_code(exc)
-    text = str(exc)
-    if code == SQLITE_FULL:
-        return QueueFullError(f"queue {path}: disk full - free space or lower QUEUE_MAX_BYTES")
-    if code in (SQLITE_BUSY, SQLITE_LOCKED):
-        return QueueBusyError(f"queue {path}: locked by another process past the busy timeout")
-    return QueueError(f"queue {path}: {text}")
