@@ -72,6 +72,7 @@ class DdsReaders:
                 "BRIDGE_INPUT=dds: needs cyclonedds (pip install 'phytrace-edge[dds]')"
             ) from None
         domain_id, config = domain_settings(env)
+        # the Domain object carries the configuration: it must live as long as the readers
         self._domain = Domain(domain_id, config) if config else None
         self.participant: Any = DomainParticipant(domain_id)
         self._on_message = on_message

@@ -16,12 +16,12 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
+from phytrace_edge.ingest.handlers import Reading
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 log = logging.getLogger(__name__)
 
 LOG_EVERY_S = 60.0
-Reading = dict[str, Any]
 
 
 class Dispatcher:

@@ -37,7 +37,6 @@ class BridgeNode:
         )
         self.dispatcher = Dispatcher(self.builder.add_reading)
         self._emit = emit
-        self.events_built = 0
         self.subscriber = TopicSubscriber(
             api, self.node, settings.topics, self.dispatcher, settings.topic_qos
         )
@@ -52,6 +51,4 @@ class BridgeNode:
         return dict(self.subscriber.qos_incompatible)
 
     def tick(self) -> None:
-        event = self.builder.build_event()
-        self.events_built += 1
-        self._emit(event)
+        self._emit(self.builder.build_event())

@@ -24,10 +24,6 @@ class SystemdNotifier:
         mine = not watchdog_pid or watchdog_pid == str(os.getpid())
         self.watchdog_s = int(watchdog_usec) / 1e6 if watchdog_usec.isdigit() and mine else None
 
-    @property
-    def enabled(self) -> bool:
-        return bool(self._address)
-
     def notify(self, **fields: str) -> None:
         """Send ``READY=1`` and the like: ``notify(READY="1", STATUS="...")``."""
         if not self._address:

@@ -83,6 +83,7 @@ class SimSource:
         from phytrace_edge.sim.world import World
 
         self._context = mock_ros.Context()
+        self._shutdown = mock_ros.shutdown
         mock_ros.init(context=self._context)
         api = mock_ros.ros_api(self._context)
         robot_node = api.create_node("delivery_robot")
@@ -97,9 +98,7 @@ class SimSource:
 
     def stop(self) -> None:
         self._spinner.stop()
-        from phytrace_edge.sim import mock_ros
-
-        mock_ros.shutdown(context=self._context)
+        self._shutdown(context=self._context)
 
 
 class RosSource:
