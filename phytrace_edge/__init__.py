@@ -1,6 +1,6 @@
 """phytrace-edge: the PhyTrace edge telemetry bridge.
 
-ROS 2 topics -> ingest (pure handlers) -> build (one UDM event per sample tick) ->
+ROS 2 topics -> ingest (pure handlers) -> builder (one UDM event per sample tick) ->
 queue (durable SQLite WAL) -> ship (batched HTTP to PhyCloud).
 """
 
@@ -10,7 +10,8 @@ __version__ = "0.1.0"
 
 
 def run_simulation(num_ticks: int = 100, **kwargs: Any) -> dict[str, Any]:
-    """Run the simulated delivery robot through the bridge; see ``phytrace_edge.sim``."""
-    from phytrace_edge.sim.runner import run_simulation as run
+    """Run the simulated delivery robot through the bridge; see
+    ``phytrace_edge.runtime.simulation``."""
+    from phytrace_edge.runtime.simulation import run_simulation as run
 
     return run(num_ticks, **kwargs)

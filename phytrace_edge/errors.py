@@ -2,10 +2,11 @@
 
 Every error the bridge raises on purpose derives from ``PhytraceError`` and carries a
 one-line message that names the thing and, where there is one, the fix. The CLI prints
-that line and exits non-zero; it never prints a traceback for these.
+that line and exits with the error's ``exit_code``; it never prints a traceback for these.
 
-    PhytraceError
-    ├── ConfigError          a setting has a value that is not allowed
+    PhytraceError            (exit 4: the bridge could not do its work)
+    ├── ConfigError          (exit 2) a setting or argument has a value that is not allowed
+    ├── StageFailedError     (exit 5) a thread of the service could not be kept alive
     ├── MalformedMessage     a ROS message cannot be turned into a reading
     ├── QueueError           the queue database cannot do what was asked
     │   ├── QueueBusyError   another process held the write lock past the busy timeout
@@ -23,9 +24,20 @@ Whether an error is worth retrying is its type, never a string match.
 
 from __future__ import annotations
 
+# Exit codes of the ``phytrace-edge`` command (docs/operations.md has the table).
+EXIT_OK = 0
+EXIT_UNHEALTHY = 1  # status: unhealthy; drain: events left; a replay or simulation failed
+EXIT_BAD_INPUT = 2  # a bad setting or argument
+EXIT_NOT_RUNNING = 3  # status: no service runs on this queue, or there is no queue
+EXIT_RUNTIME = 4  # the queue or the network could not be used
+EXIT_STAGE_FAILED = 5  # a thread kept failing: let systemd or Docker restart the process
+EXIT_INTERRUPTED = 130
+
 
 class PhytraceError(Exception):
     """Base of every error phytrace-edge raises on purpose."""
+
+    exit_code = EXIT_RUNTIME
 
 
 class ConfigError(PhytraceError):
@@ -34,6 +46,14 @@ class ConfigError(PhytraceError):
     The message names the setting, the offending value (redacted for secrets) and what
     is allowed, e.g. ``SAMPLE_RATE_HZ='-1': must be a number > 0 and <= 1000``.
     """
+
+    exit_code = EXIT_BAD_INPUT
+
+
+class StageFailedError(PhytraceError):
+    """A thread of the service failed too often in a short time to keep restarting it."""
+
+    exit_code = EXIT_STAGE_FAILED
 
 
 class MalformedMessage(PhytraceError):

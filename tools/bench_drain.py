@@ -27,11 +27,15 @@ import orjson
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from phytrace_edge.config import GIB, MIB, Secret
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.ship import HttpTransport, Sender, SendPolicy
-from phytrace_edge.ship.request import encode_body, request_headers
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship.options import SendPolicy
+from phytrace_edge.ship.request import BodyEncoder, request_headers
+from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.transport import HttpTransport
+from phytrace_edge.units import GIB, MIB
 from tests.processes import StubProcess
 
 BATCH = 500
@@ -66,8 +70,8 @@ def run_ours(
 
 def run_sender_alone(workdir: Path, events: list[dict], encoding: str) -> float:
     """The sender with a transport that discards: its own ceiling, no HTTP, no stub."""
-    from phytrace_edge.ship import FunctionTransport
     from phytrace_edge.ship.responses import Reply
+    from phytrace_edge.ship.transport import FunctionTransport
 
     store = QueueStore.open(
         workdir / f"alone-{encoding}.db", limits=QueueLimits(max_bytes=8 * GIB), sync="normal"
@@ -88,14 +92,16 @@ def run_sender_alone(workdir: Path, events: list[dict], encoding: str) -> float:
 
 
 def run_baseline(stub: StubProcess, events: list[dict], encoding: str) -> tuple[float, int]:
-    from phytrace_edge.queue import QueuedEvent
+    from phytrace_edge.queue.records import QueuedEvent
 
     batches = []
     for start in range(0, len(events), BATCH):
         chunk = [
             QueuedEvent(0, e["event_id"], orjson.dumps(e)) for e in events[start : start + BATCH]
         ]
-        body = encode_body(b'{"events":[' + b",".join(q.json for q in chunk) + b"]}", encoding)
+        body = BodyEncoder(encoding).encode(
+            b'{"events":[' + b",".join(q.json for q in chunk) + b"]}"
+        )
         batches.append((body, request_headers(chunk, encoding)))
     client = httpx.Client(timeout=60)
     started = time.perf_counter()

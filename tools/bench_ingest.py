@@ -32,7 +32,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from phytrace_edge.ingest import dds_types as t  # noqa: E402
+from phytrace_edge.ingest import handlers  # noqa: E402
+from phytrace_edge.ingest.sources import dds_types as t  # noqa: E402
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME  # noqa: E402
 
 RATES_HZ = {
@@ -124,7 +125,7 @@ def handler_table() -> list[tuple[str, float, float]]:
     rows = []
     for topic, sample in samples().items():
         kind, data = type(sample), sample.serialize()
-        handler = TOPIC_BY_NAME[topic].handler
+        handler = getattr(handlers, TOPIC_BY_NAME[topic].handler)
         alone = median_us(lambda k=kind, d=data: k.deserialize(d))
         full = median_us(lambda k=kind, d=data, h=handler: h(k.deserialize(d)))
         rows.append((topic, alone, full))
@@ -137,9 +138,11 @@ def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    from phytrace_edge.build import Identity, UDMBuilder
-    from phytrace_edge.ingest.bag import BagClock, replay
+    from phytrace_edge.builder.builder import UDMBuilder
+    from phytrace_edge.builder.options import BuilderOptions, Identity
     from phytrace_edge.ingest.dispatch import Dispatcher
+    from phytrace_edge.ingest.sources.bag import BagClock, replay
+    from phytrace_edge.ingest.sources.base import Feed
     from phytrace_edge.sim.recorder import record_simulation
 
     bag = workdir / "large"
@@ -153,19 +156,11 @@ def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
     bare = messages / (time.perf_counter() - started)
 
     clock = BagClock()
-    builder = UDMBuilder(Identity("bench", "amr"), stale_after_s=5.0, clock=clock)
+    builder = UDMBuilder(BuilderOptions(Identity("bench", "amr"), stale_after_s=5.0), clock=clock)
     dispatcher = Dispatcher(builder.add_reading)
     started = time.perf_counter()
-    replay(
-        str(bag),
-        {topic: topic for topic in TOPIC_BY_NAME},
-        dispatcher.on_message,
-        lambda at: builder.build_event(captured_at_s=at),
-        clock,
-        5.0,
-        0,
-        th.Event(),
-    )
+    feed = Feed(dispatcher.on_message, lambda at: builder.build_event(captured_at_s=at), 0.2)
+    replay(str(bag), {topic: topic for topic in TOPIC_BY_NAME}, feed, clock, 0, th.Event())
     ours = messages / (time.perf_counter() - started)
     return messages, bare, ours
 
@@ -182,10 +177,10 @@ def publish_load(stop: threading.Event) -> None:
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.dds import dds_topic_name, domain_settings
+    from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
 
-    domain_id, config = domain_settings(os.environ)
-    _domain = Domain(domain_id, config) if config else None
+    domain_id, localhost = domain_settings(os.environ)
+    _domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
     participant = DomainParticipant(domain_id)
     qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
     threads = []
@@ -214,10 +209,10 @@ def bare_reader(stop: threading.Event) -> None:
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.dds import dds_topic_name, domain_settings
+    from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
 
-    domain_id, config = domain_settings(os.environ)
-    _domain = Domain(domain_id, config) if config else None
+    domain_id, localhost = domain_settings(os.environ)
+    _domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
     participant = DomainParticipant(domain_id)
     qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(100))
     readers = [

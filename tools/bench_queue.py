@@ -36,9 +36,10 @@ from pathlib import Path
 
 import orjson
 
-from phytrace_edge.config import GIB
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import GIB
 
 ROUNDS = 3
 DRAIN_BATCH = 200

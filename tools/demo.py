@@ -83,6 +83,9 @@ def main() -> int:
         help="use this Python instead of .venv-demo (for the project's tests)",
     )
     args = parser.parse_args()
+    # a shell that starts us in the background leaves SIGINT ignored, and Python then
+    # installs no handler of its own: Ctrl-C (or a test's SIGINT) would do nothing
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     python = sys.executable if args.here else str(ensure_venv(".venv-demo", ".[stub]"))
     STATE.mkdir(exist_ok=True)
     port = free_port(args.port)

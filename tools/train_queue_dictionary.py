@@ -15,7 +15,7 @@ from pathlib import Path
 import orjson
 import zstandard
 
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
 
 DICTIONARY_BYTES = 16 * 1024
 OUT = Path(__file__).resolve().parent.parent / "phytrace_edge" / "queue" / "udm-events.zdict"

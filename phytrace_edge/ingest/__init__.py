@@ -1,5 +1,7 @@
-"""Ingest: ROS 2 messages -> plain readings, by pure per-topic handlers.
+"""Ingest: ROS 2 messages -> readings (plain typed dicts).
 
-``handlers`` holds the conversion functions, ``topics`` the topic table, and
-``dispatch`` the one place that calls handlers and counts what they reject.
+``topics`` is the topic table, ``handlers`` one pure function per topic (``convert``
+their shared conversions), ``dispatch`` calls them and counts rejects, ``qos`` picks a
+subscription's QoS, and ``sources/`` are the inputs: the simulator, rclpy, Cyclone DDS
+and bag replay, behind one protocol.
 """

@@ -16,8 +16,9 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
+from phytrace_edge.ingest import handlers
 from phytrace_edge.ingest.handlers import Reading
-from phytrace_edge.ingest.topics import TOPIC_BY_NAME
+from phytrace_edge.ingest.topics import TOPICS
 
 log = logging.getLogger(__name__)
 
@@ -29,6 +30,7 @@ class Dispatcher:
 
     def __init__(self, on_reading: Callable[[str, Reading], None]) -> None:
         self._on_reading = on_reading
+        self._handlers = {spec.name: getattr(handlers, spec.handler) for spec in TOPICS}
         self._lock = threading.Lock()
         self._last_logged: dict[tuple[str, str], float] = {}
         self.received: Counter[str] = Counter()
@@ -39,7 +41,7 @@ class Dispatcher:
         with self._lock:
             self.received[topic] += 1
         try:
-            reading = TOPIC_BY_NAME[topic].handler(msg)
+            reading = self._handlers[topic](msg)
         except MalformedMessage as exc:
             self._reject(topic, exc.reason, exc.detail)
             return

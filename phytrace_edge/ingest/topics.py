@@ -13,20 +13,18 @@ Two flags say how a topic's messages are treated:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
-
-from phytrace_edge.ingest import handlers
 
 
 @dataclass(frozen=True)
 class TopicSpec:
-    """One row of the topic table."""
+    """One row of the topic table. ``handler`` names the function in
+    ``ingest.handlers`` that reads the topic's messages (this table stays importable
+    without the handlers, for the settings and ``status``)."""
 
     name: str
     type_name: str
-    handler: Callable[[Any], dict[str, Any]]
+    handler: str
     domains: tuple[str, ...]
     every_message: bool = False
     latched: bool = False
@@ -38,47 +36,43 @@ class TopicSpec:
 
 
 TOPICS: tuple[TopicSpec, ...] = (
-    TopicSpec("/odom", "nav_msgs/msg/Odometry", handlers.handle_odometry, ("location", "motion")),
-    TopicSpec(
-        "/battery_state", "sensor_msgs/msg/BatteryState", handlers.handle_battery_state, ("power",)
-    ),
-    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", handlers.handle_laser_scan, ("perception",)),
-    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", handlers.handle_imu, ("perception", "motion")),
+    TopicSpec("/odom", "nav_msgs/msg/Odometry", "handle_odometry", ("location", "motion")),
+    TopicSpec("/battery_state", "sensor_msgs/msg/BatteryState", "handle_battery_state", ("power",)),
+    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "handle_laser_scan", ("perception",)),
+    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", "handle_imu", ("perception", "motion")),
     TopicSpec(
         "/cmd_vel",
         "geometry_msgs/msg/Twist",
-        handlers.handle_twist,
+        "handle_twist",
         ("motion",),
         also_types=("geometry_msgs/msg/TwistStamped",),  # what Jazzy's nav2 publishes
     ),
     TopicSpec(
         "/gps/fix",
         "sensor_msgs/msg/NavSatFix",
-        handlers.handle_nav_sat_fix,
+        "handle_nav_sat_fix",
         ("location", "perception"),
     ),
     TopicSpec(
         "/diagnostics",
         "diagnostic_msgs/msg/DiagnosticArray",
-        handlers.handle_diagnostic_array,
+        "handle_diagnostic_array",
         ("operational",),
         every_message=True,
     ),
     TopicSpec(
         "/goal_pose",
         "geometry_msgs/msg/PoseStamped",
-        handlers.handle_pose_stamped,
+        "handle_pose_stamped",
         ("navigation",),
         every_message=True,
         latched=True,
     ),
-    TopicSpec(
-        "/joint_states", "sensor_msgs/msg/JointState", handlers.handle_joint_state, ("actuators",)
-    ),
+    TopicSpec("/joint_states", "sensor_msgs/msg/JointState", "handle_joint_state", ("actuators",)),
     TopicSpec(
         "/delivery/status",
         "std_msgs/msg/String",
-        handlers.handle_delivery_status,
+        "handle_delivery_status",
         ("operational", "payload"),
         every_message=True,
         latched=True,
@@ -86,3 +80,4 @@ TOPICS: tuple[TopicSpec, ...] = (
 )
 
 TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
+TOPIC_NAMES = tuple(TOPIC_BY_NAME)

@@ -31,7 +31,7 @@ def bridge_command(bridge_input: str) -> list:
     parameters = []
     for name in ARGUMENTS:
         parameters += ["-p", [name, ":=", LaunchConfiguration(name)]]
-    return ["phytrace-edge", "run", "--bridge-input", bridge_input, "--ros-args", *parameters]
+    return ["phytrace-edge", "run", "--input", bridge_input, "--ros-args", *parameters]
 
 
 def generate_launch_description() -> LaunchDescription:

@@ -6,12 +6,16 @@ to write than raw JSON (fewer bytes reach the WAL); zstd without a dictionary ga
 under 3x, gzip less, so ``zstd`` always means zstd with the dictionary. The codec and
 dictionary id are stored with each row, so changing ``QUEUE_COMPRESSION`` never makes
 old rows unreadable.
+
+python-zstandard's compressors and decompressors must not be shared between threads:
+each thread that encodes or decodes gets its own.
 """
 
 from __future__ import annotations
 
 import functools
 import gzip
+import threading
 import zlib
 from dataclasses import dataclass
 from importlib import resources
@@ -39,6 +43,14 @@ def packaged_dictionary() -> tuple[int, bytes]:
     return zstandard.ZstdCompressionDict(content).dict_id(), content
 
 
+class _PerThread(threading.local):
+    compressor: zstandard.ZstdCompressor | None = None
+    decompressors: dict[int, zstandard.ZstdDecompressor]
+
+    def __init__(self) -> None:
+        self.decompressors = {}
+
+
 class Codecs:
     """Encoders for one setting, decoders for every codec and known dictionary."""
 
@@ -47,10 +59,7 @@ class Codecs:
         self._dict_id, content = packaged_dictionary()
         self._dictionaries: dict[int, zstandard.ZstdCompressionDict] = {}
         self.add_dictionary(self._dict_id, content)
-        self._dict_compressor = zstandard.ZstdCompressor(
-            level=ZSTD_LEVEL, dict_data=self._dictionaries[self._dict_id]
-        )
-        self._decompressors: dict[int, zstandard.ZstdDecompressor] = {}
+        self._local = _PerThread()
 
     @property
     def dict_id(self) -> int:
@@ -62,7 +71,7 @@ class Codecs:
 
     def encode(self, json_bytes: bytes) -> Encoded:
         if self.codec == ZSTD_DICT:
-            return Encoded(ZSTD_DICT, self._dict_id, self._dict_compressor.compress(json_bytes))
+            return Encoded(ZSTD_DICT, self._dict_id, self._compressor().compress(json_bytes))
         if self.codec == GZIP:
             return Encoded(GZIP, None, gzip.compress(json_bytes, GZIP_LEVEL, mtime=0))
         return Encoded(NONE, None, json_bytes)
@@ -76,11 +85,20 @@ class Codecs:
             return self._decompressor(dict_id).decompress(body)
         raise ValueError(f"unknown codec {codec}")
 
+    def _compressor(self) -> zstandard.ZstdCompressor:
+        compressor = self._local.compressor
+        if compressor is None:
+            compressor = zstandard.ZstdCompressor(
+                level=ZSTD_LEVEL, dict_data=self._dictionaries[self._dict_id]
+            )
+            self._local.compressor = compressor
+        return compressor
+
     def _decompressor(self, dict_id: int) -> zstandard.ZstdDecompressor:
-        decompressor = self._decompressors.get(dict_id)
+        decompressor = self._local.decompressors.get(dict_id)
         if decompressor is None:
             if dict_id not in self._dictionaries:
                 raise ValueError(f"zstd dictionary {dict_id} is not in the queue database")
             decompressor = zstandard.ZstdDecompressor(dict_data=self._dictionaries[dict_id])
-            self._decompressors[dict_id] = decompressor
+            self._local.decompressors[dict_id] = decompressor
         return decompressor

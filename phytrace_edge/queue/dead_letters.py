@@ -7,13 +7,15 @@ the events go to the back of the queue and are sent again) or ``purge``.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import IO, Any
 
 import orjson
 
-from phytrace_edge.queue.store import QueueStore, bump_counters
+from phytrace_edge.queue.codecs import Codecs
+from phytrace_edge.queue.database import Database, bump_counters
+from phytrace_edge.queue.rows import insert_rows
 
 _COLUMNS = "id, event_id, queued_at, dead_at, reason, status_code, response, json_size"
 
@@ -33,17 +35,20 @@ class DeadLetterInfo:
 
 
 class DeadLetterBox:
-    """List, export, requeue and purge the dead letters of one queue."""
+    """List, export, requeue and purge the dead letters of one queue
+    (``QueueStore.dead_letters``)."""
 
-    def __init__(self, store: QueueStore) -> None:
-        self._store = store
+    def __init__(self, db: Database, codecs: Codecs, clock: Callable[[], float]) -> None:
+        self._db = db
+        self._codecs = codecs
+        self._clock = clock
 
     def count(self) -> int:
-        return self._store.stats_counter("dead_letters")
+        return self._db.counter("dead_letters")
 
     def list(self, limit: int = 100, offset: int = 0) -> list[DeadLetterInfo]:
         """Oldest first."""
-        rows = self._store.read(
+        rows = self._db.read(
             f"SELECT {_COLUMNS} FROM dead_letters ORDER BY id LIMIT ? OFFSET ?", (limit, offset)
         )
         return [DeadLetterInfo(*row) for row in rows]
@@ -52,7 +57,7 @@ class DeadLetterBox:
         """Every dead letter with its decoded event, oldest first, a chunk at a time."""
         after = 0
         while True:
-            rows = self._store.read(
+            rows = self._db.read(
                 f"SELECT {_COLUMNS}, codec, dict_id, body FROM dead_letters "
                 "WHERE id > ? ORDER BY id LIMIT ?",
                 (after, chunk),
@@ -60,7 +65,7 @@ class DeadLetterBox:
             if not rows:
                 return
             for *info, codec, dict_id, body in rows:
-                event = orjson.loads(self._store.codecs.decode(codec, dict_id, body))
+                event = orjson.loads(self._codecs.decode(codec, dict_id, body))
                 yield DeadLetterInfo(*info), event
             after = rows[-1][0]
 
@@ -76,14 +81,14 @@ class DeadLetterBox:
     def requeue(self, ids: Sequence[int] | None = None) -> int:
         """Move dead letters (all, or ``ids``) back to the end of the queue."""
         where, params = _selection(ids)
-        now = self._store.now()
-        with self._store.transaction() as cursor:
+        now = self._clock()
+        with self._db.transaction() as cursor:
             rows = cursor.execute(
                 f"SELECT event_id, ?, codec, dict_id, json_size, body FROM dead_letters {where} "
                 "ORDER BY id",
                 (now, *params),
             ).fetchall()
-            self._store.insert_rows(cursor, rows, requeued_total=len(rows), dead_letters=-len(rows))
+            insert_rows(cursor, rows, requeued_total=len(rows), dead_letters=-len(rows))
             cursor.execute(f"DELETE FROM dead_letters {where}", params)
         return len(rows)
 
@@ -94,7 +99,7 @@ class DeadLetterBox:
         if before is not None:
             where += (" AND" if where else "WHERE") + " dead_at < ?"
             params = (*selected, before)
-        with self._store.transaction() as cursor:
+        with self._db.transaction() as cursor:
             purged = int(cursor.execute(f"DELETE FROM dead_letters {where}", params).rowcount)
             bump_counters(cursor, dead_letters=-purged)
         return purged

@@ -1,20 +1,8 @@
-"""The queue's value types: what goes in, what comes out, what it reports."""
+"""The queue's value types: what goes in and what comes out."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from phytrace_edge.config import DEFAULT_QUEUE_TTL_S
-
-
-@dataclass(frozen=True)
-class QueueLimits:
-    """Caps and policies (QUEUE_MAX_BYTES, QUEUE_MAX_EVENTS, QUEUE_ON_FULL, QUEUE_TTL_S)."""
-
-    max_bytes: int
-    max_events: int | None = None
-    on_full: str = "drop_oldest"
-    ttl_s: float = DEFAULT_QUEUE_TTL_S
 
 
 @dataclass(frozen=True)
@@ -54,22 +42,3 @@ class DeadLetter:
     reason: str
     status_code: int | None = None
     response: str | None = None
-
-
-@dataclass(frozen=True)
-class QueueStats:
-    """What ``status`` shows about the queue; cheap to read while the bridge writes."""
-
-    path: str
-    depth: int
-    stored_bytes: int
-    file_bytes: int
-    oldest_queued_at: float | None
-    newest_queued_at: float | None
-    drops: dict[str, int]
-    dead_letters: int
-    queued_total: int
-    acked_total: int
-    leased: int
-    max_bytes: int = 0
-    quarantined: str | None = None

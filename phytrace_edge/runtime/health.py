@@ -1,8 +1,10 @@
 """Is the bridge healthy? A pure function of what ``status`` read and a few thresholds.
 
 Unhealthy when: the service's heartbeat is stale while it claims to run (hung or
-killed); PhyCloud refuses the API key; the queue is above QUEUE_WARN_FRACTION of its
-cap; or events are waiting and nothing was sent for HEALTH_NO_PROGRESS_S.
+killed); a stage of the service has made no progress for HEALTH_STALE_S, or one could
+not be kept alive; PhyCloud refuses the API key; the queue is above
+QUEUE_WARN_FRACTION of its cap; or events are waiting and nothing was sent for
+HEALTH_NO_PROGRESS_S.
 """
 
 from __future__ import annotations
@@ -10,10 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from phytrace_edge.runtime.state import Snapshot
+from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
+from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.udm.event import format_timestamp
-
-HEALTHY, UNHEALTHY, NOT_RUNNING = 0, 1, 3
 
 
 @dataclass(frozen=True)
@@ -28,42 +29,42 @@ def _iso(unix_s: float | None) -> str | None:
     return None if unix_s is None else format_timestamp(unix_s)
 
 
-def report(snapshot: Snapshot, limits: Thresholds, now: float, path: str) -> dict[str, Any]:
+def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
     """The status document (docs/operations.md lists its keys) with ``healthy`` and
     ``problems``."""
-    counters, service = snapshot.counters, snapshot.service
+    state = stats.service
+    service = state.document if state else {}
     sender = service.get("sender", {})
-    heartbeat_age = None if snapshot.heartbeat_at is None else round(now - snapshot.heartbeat_at, 1)
-    oldest_age = (
-        None if snapshot.oldest_queued_at is None else round(now - snapshot.oldest_queued_at, 1)
-    )
-    depth = counters.get("depth", 0)
+    heartbeat_age = None if state is None else round(now - state.heartbeat_at, 1)
+    oldest_age = None if stats.oldest_queued_at is None else round(now - stats.oldest_queued_at, 1)
     last_success = sender.get("last_success_at")
-    running = (
-        snapshot.running and heartbeat_age is not None and heartbeat_age <= limits.stale_after_s
-    )
+    claims_to_run = state is not None and state.running
+    running = claims_to_run and heartbeat_age is not None and heartbeat_age <= limits.stale_after_s
+    stages = service.get("stages", {})
 
     problems = []
-    if snapshot.running and not running:
+    if claims_to_run and not running:
         problems.append(f"heartbeat is {heartbeat_age:.0f} s old: the service hung or died")
+    if running:
+        problems += _stage_problems(stages, limits.stale_after_s)
     if sender.get("last_status") in (401, 403) and (sender.get("last_error_at") or 0) > (
         last_success or 0
     ):
         problems.append(
             f"PhyCloud refuses the API key (HTTP {sender['last_status']}) - check PHYCLOUD_API_KEY"
         )
-    fill = snapshot.file_bytes / limits.queue_max_bytes if limits.queue_max_bytes else 0.0
+    fill = stats.file_bytes / limits.queue_max_bytes if limits.queue_max_bytes else 0.0
     if fill > limits.queue_warn_fraction:
         problems.append(f"queue is {fill:.0%} of QUEUE_MAX_BYTES")
     waited = oldest_age is not None and oldest_age > limits.no_progress_s
     idle = last_success is None or now - last_success > limits.no_progress_s
-    if depth and waited and idle:
+    if stats.depth and waited and idle:
         problems.append(
-            f"{depth} event(s) waiting and nothing sent for over "
+            f"{stats.depth} event(s) waiting and nothing sent for over "
             f"{limits.no_progress_s:.0f} s (last error: {sender.get('last_error')})"
         )
-    if snapshot.quarantined:
-        problems.append(f"a corrupt queue file was moved aside: {snapshot.quarantined}")
+    if stats.quarantined:
+        problems.append(f"a corrupt queue file was moved aside: {stats.quarantined}")
 
     return {
         "healthy": not problems and running,
@@ -77,18 +78,18 @@ def report(snapshot: Snapshot, limits: Thresholds, now: float, path: str) -> dic
         }
         | {"started_at": _iso(service.get("started_at"))},
         "queue": {
-            "path": path,
-            "depth": depth,
-            "bytes": snapshot.file_bytes,
+            "path": stats.path,
+            "depth": stats.depth,
+            "bytes": stats.file_bytes,
             "cap_bytes": limits.queue_max_bytes,
             "fill": round(fill, 4),
             "oldest_age_s": oldest_age,
-            "quarantined": snapshot.quarantined,
+            "quarantined": stats.quarantined,
         },
-        "drops": {k[5:]: v for k, v in counters.items() if k.startswith("drop:") and v},
-        "dead_letters": counters.get("dead_letters", 0),
-        "queued_total": counters.get("queued_total", 0),
-        "sent_total": counters.get("acked_total", 0),
+        "drops": stats.drops,
+        "dead_letters": stats.dead_letters,
+        "queued_total": stats.queued_total,
+        "sent_total": stats.acked_total,
         "send_rate_eps": sender.get("send_rate_eps", 0.0) if running else 0.0,
         "last_success_at": _iso(last_success),
         "last_error": sender.get("last_error"),
@@ -97,11 +98,25 @@ def report(snapshot: Snapshot, limits: Thresholds, now: float, path: str) -> dic
         "batches_split": sender.get("batches_split", 0),
         "auth_failures": sender.get("auth_failures", 0),
         "events_built": service.get("events_built", 0),
+        "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
+        "stages": stages,
         "topics": service.get("topics", {}),
     }
 
 
+def _stage_problems(stages: dict[str, Any], stale_after_s: float) -> list[str]:
+    problems = []
+    for name, stage in stages.items():
+        age = stage.get("progress_age_s")
+        bound = max(stale_after_s, stage.get("stall_after_s", 0.0))
+        if stage.get("failed"):
+            problems.append(f"stage {name} could not be kept alive: {stage['failed']}")
+        elif age is not None and age > bound:
+            problems.append(f"stage {name} has made no progress for {age:.0f} s")
+    return problems
+
+
 def exit_code(document: dict[str, Any]) -> int:
     if document["problems"]:
-        return UNHEALTHY
-    return HEALTHY if document["running"] else NOT_RUNNING
+        return EXIT_UNHEALTHY
+    return EXIT_OK if document["running"] else EXIT_NOT_RUNNING

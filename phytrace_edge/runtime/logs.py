@@ -13,6 +13,7 @@ from typing import Any
 
 import orjson
 
+from phytrace_edge.redact import redact
 from phytrace_edge.udm.event import format_timestamp
 
 TEXT_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -27,21 +28,28 @@ class JsonFormatter(logging.Formatter):
             "message": record.getMessage(),
         }
         if record.exc_info:
-            document["exception"] = self.formatException(record.exc_info)
+            document["exception"] = record.exc_text or self.formatException(record.exc_info)
         return orjson.dumps(document).decode()
 
 
 class RedactSecrets(logging.Filter):
+    """Masks every form of the secrets (as is, escaped, percent-encoded) in a record's
+    message and in its exception's text."""
+
     def __init__(self, secrets: Iterable[str]) -> None:
         super().__init__()
         self._secrets = [s for s in secrets if len(s) >= 4]
 
     def filter(self, record: logging.LogRecord) -> bool:
+        if not self._secrets:
+            return True
         message = record.getMessage()
-        if any(secret in message for secret in self._secrets):
-            for secret in self._secrets:
-                message = message.replace(secret, "***")
-            record.msg, record.args = message, None
+        masked = redact(message, self._secrets)
+        if masked != message:
+            record.msg, record.args = masked, None
+        if record.exc_info:
+            text = logging.Formatter().formatException(record.exc_info)
+            record.exc_text = redact(text, self._secrets)
         return True
 
 

@@ -1,11 +1,11 @@
 """Prometheus metrics (METRICS_PORT, off by default): a collector that reads the live
-state of the service at each scrape, so nothing is counted twice or goes stale."""
+figures of the service at each scrape, so nothing is counted twice or goes stale."""
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Iterator
+from typing import Any
 
 from prometheus_client import start_http_server
 from prometheus_client.core import (
@@ -16,23 +16,19 @@ from prometheus_client.core import (
 )
 from prometheus_client.registry import CollectorRegistry
 
+from phytrace_edge.runtime.heartbeat import Figures
 from phytrace_edge.ship.sender import LATENCY_BUCKETS_S
-
-if TYPE_CHECKING:
-    from phytrace_edge.runtime.service import BridgeService
 
 log = logging.getLogger(__name__)
 
 
 class BridgeCollector:
-    def __init__(self, service: BridgeService) -> None:
-        self.service = service
+    def __init__(self, read_figures: Callable[[], Figures]) -> None:
+        self._read_figures = read_figures
 
     def collect(self) -> Iterator[Metric]:
-        service = self.service
-        stats = service.store.stats()
-        sender = service.sender.stats
-        now = service.store.now()
+        figures = self._read_figures()
+        stats, sender, now = figures.queue, figures.sender, figures.now
 
         def gauge(name: str, doc: str, value: float | None) -> GaugeMetricFamily:
             return GaugeMetricFamily(f"phytrace_{name}", doc, value=value if value else 0.0)
@@ -49,7 +45,7 @@ class BridgeCollector:
             None if stats.oldest_queued_at is None else now - stats.oldest_queued_at,
         )
         yield gauge("dead_letters", "Events kept as dead letters.", stats.dead_letters)
-        yield counter("events_built", "UDM events built.", service.events_built)
+        yield counter("events_built", "UDM events built.", figures.events_built)
         yield counter("events_queued", "Events put into the queue (ever).", stats.queued_total)
         yield counter("events_sent", "Events PhyCloud accepted (ever).", stats.acked_total)
         dropped = CounterMetricFamily(
@@ -57,8 +53,14 @@ class BridgeCollector:
         )
         for reason, count in stats.drops.items():
             dropped.add_metric([reason], count)
-        dropped.add_metric(["writer_backlog"], service.writer.events_dropped)
+        dropped.add_metric(["writer_backlog"], figures.writer_dropped)
         yield dropped
+        restarts = CounterMetricFamily(
+            "phytrace_thread_restarts", "Threads restarted after a failure.", labels=["thread"]
+        )
+        for thread, count in figures.thread_restarts.items():
+            restarts.add_metric([thread], count)
+        yield restarts
         yield counter("send_retries", "Send attempts retried.", sender.retries)
         yield counter(
             "batches_split", "Batches split to isolate rejected events.", sender.batches_split
@@ -80,41 +82,41 @@ class BridgeCollector:
             buckets=buckets,
             sum_value=sender.latency_sum_s,
         )
-        yield from self._topics()
+        yield from _topics(figures.topics)
 
-    def _topics(self) -> Iterator[Metric]:
-        bridge = self.service.source.bridge
-        received = CounterMetricFamily(
-            "phytrace_topic_messages", "Messages received.", labels=["topic"]
-        )
-        ages = GaugeMetricFamily(
-            "phytrace_topic_last_seen_age_seconds",
-            "Seconds since the topic's latest message.",
-            labels=["topic"],
-        )
-        rejected = CounterMetricFamily(
-            "phytrace_topic_rejected", "Messages rejected.", labels=["topic", "reason"]
-        )
-        incompatible = CounterMetricFamily(
-            "phytrace_topic_qos_incompatible",
-            "Publishers whose QoS the subscription could not match.",
-            labels=["topic"],
-        )
-        for topic, count in bridge.dispatcher.received.items():
-            received.add_metric([topic], count)
-        for topic, age in bridge.builder.topic_ages().items():
-            ages.add_metric([topic], age)
-        for (topic, reason), count in bridge.dispatcher.rejected.items():
+
+def _topics(topics: dict[str, dict[str, Any]]) -> Iterator[Metric]:
+    received = CounterMetricFamily(
+        "phytrace_topic_messages", "Messages received.", labels=["topic"]
+    )
+    ages = GaugeMetricFamily(
+        "phytrace_topic_last_seen_age_seconds",
+        "Seconds since the topic's latest message.",
+        labels=["topic"],
+    )
+    rejected = CounterMetricFamily(
+        "phytrace_topic_rejected", "Messages rejected.", labels=["topic", "reason"]
+    )
+    incompatible = CounterMetricFamily(
+        "phytrace_topic_qos_incompatible",
+        "Publishers whose QoS the subscription could not match.",
+        labels=["topic"],
+    )
+    for topic, figures in topics.items():
+        received.add_metric([topic], figures["received"])
+        if figures.get("last_seen_age_s") is not None:
+            ages.add_metric([topic], figures["last_seen_age_s"])
+        for reason, count in figures.get("rejected", {}).items():
             rejected.add_metric([topic, reason], count)
-        for topic, count in getattr(bridge, "qos_incompatible", {}).items():
-            incompatible.add_metric([topic], count)
-        yield from (received, ages, rejected, incompatible)
+        if "qos_incompatible" in figures:
+            incompatible.add_metric([topic], figures["qos_incompatible"])
+    yield from (received, ages, rejected, incompatible)
 
 
-def serve_metrics(service: BridgeService, host: str, port: int) -> Any:
+def serve_metrics(read_figures: Callable[[], Figures], host: str, port: int) -> Any:
     """Serve /metrics on host:port in a daemon thread; the server object."""
     registry = CollectorRegistry()
-    registry.register(BridgeCollector(service))
+    registry.register(BridgeCollector(read_figures))
     server, _thread = start_http_server(port, addr=host, registry=registry)
     log.info("metrics on http://%s:%d/metrics", host, server.server_port)
     return server

@@ -1,90 +1,61 @@
-"""The bridge as a service: source -> writer -> queue -> sender, and a clean stop.
+"""The bridge as a service: source -> sampler -> writer -> queue -> sender, supervised,
+and a clean stop.
 
-Threads: the source's executor (ingest and build), the queue writer, the sender and
-the maintenance loop. They share only the queue file and the writer's hand-off, so a
+Threads (each a supervised worker): ``ingest`` (the source's loop), ``sampler`` (the
+sample tick, for live inputs), ``writer``, ``sender``, ``heartbeat`` and
+``maintenance``. They share only the queue file and the writer's hand-off, so a
 stalled PhyCloud never slows ingest and a burst of messages never blocks a send.
+``runtime/wiring.py`` builds the parts; this module runs them.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
-from collections.abc import Callable, Mapping
-from pathlib import Path
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
-from urllib.parse import urlsplit
 
 from phytrace_edge import __version__
-from phytrace_edge.config import Settings, format_bytes
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.runtime.sources import Source, make_source
-from phytrace_edge.runtime.state import HEARTBEAT_S, Rates, service_document, write_state
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.sampler import Sampler
+from phytrace_edge.errors import QueueError
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.sources.base import Feed, Finished, Source
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime.heartbeat import (
+    HEARTBEAT_S,
+    Figures,
+    Rates,
+    service_document,
+    topic_report,
+)
+from phytrace_edge.runtime.supervisor import Beat, Supervisor, Worker
 from phytrace_edge.runtime.writer import QueueWriter
-from phytrace_edge.ship import HttpTransport, Sender, SendPolicy, Transport
+from phytrace_edge.ship.sender import Sender
 from phytrace_edge.udm.schema import check_event
+from phytrace_edge.units import format_bytes
 
 log = logging.getLogger(__name__)
 
 MAINTENANCE_EVERY_S = 60.0
+STOP_TIMEOUT_S = 5.0
 
 
-def open_queue(settings: Settings) -> QueueStore:
-    """The queue named by the settings. The lease outlives the longest retry wait, so a
-    batch that is still being retried is not taken by a second sender."""
-    return QueueStore.open(
-        str(settings.queue_path),
-        limits=QueueLimits(
-            max_bytes=settings.queue_max_bytes,
-            max_events=settings.queue_max_events,
-            on_full=settings.queue_on_full,
-            ttl_s=settings.queue_ttl_s,
-        ),
-        compression=settings.queue_compression,
-        sync=settings.queue_sync,
-        lease_s=max(60.0, 2 * (settings.retry_max_s + settings.http_timeout_s)),
-    )
+@dataclass(frozen=True)
+class ServiceOptions:
+    """What the service itself needs to know (the rest is in its parts)."""
 
-
-def send_policy(settings: Settings) -> SendPolicy:
-    return SendPolicy(
-        batch_size=settings.batch_size,
-        batch_max_bytes=settings.batch_max_bytes,
-        flush_interval_s=settings.flush_interval_s,
-        retry_min_s=settings.retry_min_s,
-        retry_max_s=settings.retry_max_s,
-        http_compression=settings.http_compression,
-        upload_max_bps=settings.upload_max_bps,
-    )
-
-
-def http_transport(settings: Settings) -> HttpTransport:
-    return HttpTransport(
-        settings.phycloud_endpoint,
-        settings.phycloud_api_key,
-        settings.http_timeout_s,
-        settings.ca_bundle,
-    )
-
-
-def warn_if_not_on_a_volume(queue_path: Path, env: Mapping[str, str]) -> bool:
-    """In the container, a queue that is not on a mounted volume dies with the container
-    and takes the backlog with it: say so loudly. True when it warned."""
-    if not env.get("PHYTRACE_CONTAINER"):
-        return False
-    folder = queue_path.resolve().parent
-    if any(os.path.ismount(p) for p in (folder, *folder.parents) if str(p) != "/"):
-        return False
-    log.warning(
-        "!!! the queue %s is not on a mounted volume: the backlog will be lost with the "
-        "container. Mount a volume at %s (docker run -v phytrace-queue:%s, or compose's "
-        "volumes) !!!",
-        queue_path,
-        folder,
-        folder,
-    )
-    return True
+    input_label: str  # BRIDGE_INPUT as configured
+    source_id: str
+    source_type: str
+    endpoint_host: str
+    sample_rate_hz: float
+    shutdown_grace_s: float
+    stall_after_s: float = 30.0  # a worker without progress this long is stuck
+    metrics_host: str = "127.0.0.1"
+    metrics_port: int = 0
 
 
 class BridgeService:
@@ -92,30 +63,32 @@ class BridgeService:
 
     def __init__(
         self,
-        settings: Settings,
-        transport: Transport | None = None,
+        options: ServiceOptions,
+        store: QueueStore,
+        sender: Sender,
+        source: Source,
+        builder: UDMBuilder,
         on_event: Callable[[dict[str, Any]], None] | None = None,
-        ros_args: list[str] | None = None,
+        supervisor: Supervisor | None = None,
     ) -> None:
-        warn_if_not_on_a_volume(Path(str(settings.queue_path)), os.environ)
-        self.settings = settings
-        self._on_event = on_event
-        self.events_built = 0
-        self.store = open_queue(settings)
-        self.writer = QueueWriter(self.store)
-        self.sender = Sender(
-            self.store, transport or http_transport(settings), send_policy(settings)
+        self.options = options
+        self.store = store
+        self.sender = sender
+        self.source = source
+        self.builder = builder
+        self.dispatcher = Dispatcher(builder.add_reading)
+        self.writer = QueueWriter(store)
+        self.sampler = Sampler(
+            builder, self._emit, options.sample_rate_hz, before_tick=source.before_tick
         )
-        self.source: Source = make_source(settings, self._emit, ros_args or [])
-        self._stop_maintenance = threading.Event()
-        self._rates = Rates()
-        self._metrics: Any = None
+        self.supervisor = supervisor or Supervisor()
+        self.finished = threading.Event()  # a finite input (a bag) was read to its end
+        self.events_built = 0
         self.store_depth_at_stop = 0
         self.started_at = time.time()
-        self._threads = [
-            threading.Thread(target=self.sender.run, name="sender", daemon=True),
-            threading.Thread(target=self._maintain, name="maintenance", daemon=True),
-        ]
+        self._on_event = on_event
+        self._rates = Rates()
+        self._metrics: Any = None
 
     def _emit(self, event: dict[str, Any]) -> None:
         self.events_built += 1
@@ -125,12 +98,12 @@ class BridgeService:
         self.writer.put(event)
 
     def summary(self) -> str:
-        s = self.settings
-        depth = self.store.stats_counter("depth")
+        o = self.options
         return (
-            f"phytrace-edge {__version__}: {s.source_id} ({s.source_type}) input {s.bridge_input} "
-            f"at {s.sample_rate_hz:g} Hz -> {urlsplit(s.phycloud_endpoint).netloc}; queue "
-            f"{s.queue_path} ({depth} events, cap {format_bytes(s.queue_max_bytes)})"
+            f"phytrace-edge {__version__}: {o.source_id} ({o.source_type}) input "
+            f"{o.input_label} at {o.sample_rate_hz:g} Hz -> {o.endpoint_host}; queue "
+            f"{self.store.path} ({self.store.counter('depth')} events, cap "
+            f"{format_bytes(self.store.limits.max_bytes)})"
         )
 
     def status_line(self) -> str:
@@ -142,95 +115,151 @@ class BridgeService:
             else (f"{time.time() - stats.last_success_at:.0f} s ago")
         )
         return (
-            f"{self.store.stats_counter('depth')} queued, {stats.events_sent} sent, "
+            f"{self.store.counter('depth')} queued, {stats.events_sent} sent, "
             f"last success {last}"
             + (f", last error {stats.last_error}" if stats.last_error else "")
         )
 
-    def alive(self) -> bool:
-        """Whether the sender, maintenance and writer threads all still run."""
-        return all(thread.is_alive() for thread in self._threads) and self.writer.alive()
+    # ------------------------------------------------------------------ lifecycle
 
     def start(self) -> None:
-        self.writer.start()
-        for thread in self._threads:
-            thread.start()
-        self.source.start()
+        """Open the input and start every worker."""
+        self.source.start(
+            Feed(self.dispatcher.on_message, self.sampler.tick, self.sampler.period_s)
+        )
+        start = self.supervisor.start
+        start(Worker("writer", self.writer.run, self.writer.stop))
+        start(Worker("sender", self.sender.run, self.sender.stop))
+        start(Worker("heartbeat", self._heartbeat_loop))
+        start(Worker("maintenance", self._maintenance_loop))
+        ingest = Worker("ingest", self._ingest_loop, finite=True)
+        start(ingest)
+        if not self.source.keeps_time:
+            start(Worker("sampler", lambda beat: self.sampler.run(ingest.stop, beat), ingest.stop))
         self.heartbeat(running=True)
-        if self.settings.metrics_port:
+        if self.options.metrics_port:
             from phytrace_edge.runtime.metrics import serve_metrics
 
             self._metrics = serve_metrics(
-                self, self.settings.metrics_host, self.settings.metrics_port
+                self.figures, self.options.metrics_host, self.options.metrics_port
             )
 
-    def _maintain(self) -> None:
-        """Heartbeat every HEARTBEAT_S; queue upkeep (TTL, space) every minute."""
-        last_upkeep = time.monotonic()
-        while not self._stop_maintenance.wait(HEARTBEAT_S):
+    def _ingest_loop(self, beat: Beat) -> None:
+        stop = self.supervisor.workers["ingest"].stop
+        self.source.run(stop, beat)
+        if not stop.is_set():
+            self.finished.set()
+
+    def _heartbeat_loop(self, beat: Beat) -> None:
+        stop = self.supervisor.workers["heartbeat"].stop
+        while not stop.wait(HEARTBEAT_S):
             try:
                 self.heartbeat(running=True)
-                if time.monotonic() - last_upkeep >= MAINTENANCE_EVERY_S:
-                    last_upkeep = time.monotonic()
-                    self.store.maintain()
-            except Exception:
-                log.exception("queue maintenance failed; will try again")
+            except QueueError as exc:  # busy or full for now: the next beat tries again
+                log.warning("heartbeat not written: %s", exc)
+            beat()
+
+    def _maintenance_loop(self, beat: Beat) -> None:
+        stop = self.supervisor.workers["maintenance"].stop
+        due = time.monotonic() + MAINTENANCE_EVERY_S
+        while not stop.wait(HEARTBEAT_S):
+            beat()
+            if time.monotonic() < due:
+                continue
+            due = time.monotonic() + MAINTENANCE_EVERY_S
+            try:
+                self.store.maintain()
+            except QueueError as exc:
+                log.warning("queue maintenance failed (%s); will try again", exc)
+
+    def healthy(self) -> bool:
+        """Whether every worker runs and made progress lately (feeds the watchdog)."""
+        if self.supervisor.failed.is_set():
+            return False
+        ages = self.supervisor.progress_ages().values()
+        return all(age <= self.options.stall_after_s for age in ages)
+
+    def finished_input(self) -> Finished | None:
+        """What a finite input did, once it is done (a bag replay's summary)."""
+        return self.source.finished() if self.finished.is_set() else None
+
+    # ------------------------------------------------------------------ figures
+
+    def topics(self, rates: dict[str, float]) -> dict[str, dict[str, Any]]:
+        return topic_report(
+            self.dispatcher.received,
+            self.dispatcher.rejected,
+            self.builder.topic_ages(),
+            self.source.topic_stats(),
+            rates,
+        )
+
+    def stages(self) -> dict[str, dict[str, Any]]:
+        sup = self.supervisor
+        ages = sup.progress_ages()
+        return {
+            name: {
+                "restarts": sup.restarts.get(name, 0),
+                "progress_age_s": ages.get(name),
+                "stall_after_s": self.options.stall_after_s,
+                **({"failed": sup.failure} if name == sup.failed_worker else {}),
+            }
+            for name in sup.workers
+        }
+
+    def figures(self) -> Figures:
+        """The live figures the metrics endpoint shows."""
+        return Figures(
+            queue=self.store.stats(),
+            sender=self.sender.stats,
+            events_built=self.events_built,
+            writer_dropped=self.writer.events_dropped,
+            topics=self.topics(self._rates.rates),
+            thread_restarts=dict(self.supervisor.restarts),
+            now=self.store.now(),
+        )
 
     def heartbeat(self, running: bool) -> None:
         """Write the figures `status` shows (another process reads them)."""
-        dispatcher, builder = self.source.bridge.dispatcher, self.source.bridge.builder
-        now = time.time()
         rates = self._rates.update(
             {
                 "send": self.sender.stats.events_sent,
-                **{f"topic:{t}": n for t, n in dispatcher.received.items()},
+                **{f"topic:{t}": n for t, n in self.dispatcher.received.items()},
             },
-            now,
+            time.time(),
         )
-        ages = builder.topic_ages()
-        topics = {
-            topic: {
-                "received": received,
-                "rate_hz": rates.get(f"topic:{topic}", 0.0),
-                "last_seen_age_s": ages.get(topic),
-                "rejected": {
-                    reason: n for (t, reason), n in dispatcher.rejected.items() if t == topic
-                },
-            }
-            for topic, received in sorted(dispatcher.received.items())
-        }
-        sender = {**self.sender.stats.as_dict(), "send_rate_eps": rates.get("send", 0.0)}
-        s = self.settings
+        o = self.options
         document = service_document(
-            {
-                "input": s.bridge_input,
-                "source_id": s.source_id,
-                "endpoint_host": urlsplit(s.phycloud_endpoint).netloc,
-            },
-            sender,
-            topics,
+            {"input": o.input_label, "source_id": o.source_id, "endpoint_host": o.endpoint_host},
+            {**self.sender.stats.as_dict(), "send_rate_eps": rates.get("send", 0.0)},
+            self.topics(rates),
+            self.stages(),
             {"events_built": self.events_built, "writer_dropped": self.writer.events_dropped},
             self.started_at,
         )
-        write_state(self.store, document, running)
+        self.store.write_service_state(document, running)
 
     def shutdown(self, grace_s: float) -> None:
-        """Stop ingest, queue what was built, let the sender flush for up to ``grace_s``."""
+        """Stop in order: ingest, then queue what was built, then let the sender flush
+        for up to ``grace_s``, then the rest."""
+        sup = self.supervisor
+        sup.stop("sampler", STOP_TIMEOUT_S)
+        sup.stop("ingest", STOP_TIMEOUT_S)
         self.source.stop()
-        self.writer.stop()
+        self.writer.request_stop()
+        sup.stop("writer", 2 * STOP_TIMEOUT_S)
         self.sender.flushing.set()
         deadline = time.monotonic() + grace_s
-        while time.monotonic() < deadline and self.store.stats_counter("depth") > 0:
-            if self.sender.stop.wait(0.05):
+        sender = sup.workers["sender"]
+        while time.monotonic() < deadline and self.store.counter("depth") > 0:
+            if sender.done.wait(0.05):
                 break
-        self.sender.stop.set()
-        self._stop_maintenance.set()
+        for name in ("sender", "heartbeat", "maintenance"):
+            sup.stop(name, STOP_TIMEOUT_S)
         if self._metrics is not None:
             self._metrics.shutdown()
-        for thread in self._threads:
-            thread.join(timeout=5)
         self.sender.transport.close()
         self.heartbeat(running=False)
-        left = self.store_depth_at_stop = self.store.stats_counter("depth")
+        left = self.store_depth_at_stop = self.store.counter("depth")
         self.store.close()
         log.info("stopped; %d event(s) left in the queue for next time", left)

@@ -1,11 +1,10 @@
 """QueueWriter: events from the sample tick into the queue, on a thread of their own.
 
-The tick runs on the ROS executor; an fsync on slow robot flash can take tens of
-milliseconds, and ingest must never wait for it. The tick hands the event over in
-memory (microseconds); the writer thread puts whatever has accumulated in one
-transaction (group commit). The hand-off is bounded: if the disk stalls so long that
-it fills, the newest events are counted as dropped (``writer_backlog``) and logged,
-rather than memory growing.
+The tick must never wait for the disk: an fsync on slow robot flash can take tens of
+milliseconds. The tick hands the event over in memory (microseconds); the writer's
+loop puts whatever has accumulated in one transaction (group commit). The hand-off is
+bounded: if the disk stalls so long that it fills, the newest events are counted as
+dropped (``writer_backlog``) and logged, rather than memory growing.
 """
 
 from __future__ import annotations
@@ -13,31 +12,31 @@ from __future__ import annotations
 import logging
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue import QueueStore
+from phytrace_edge.queue.store import QueueStore
 
 log = logging.getLogger(__name__)
 
 HANDOFF_MAX_EVENTS = 10_000
 GROUP_MAX_EVENTS = 500
 RETRY_S = 0.5
+IDLE_BEAT_S = 1.0
 
 
 class QueueWriter:
+    """``put`` from any thread; ``run`` is the writer's loop (supervised)."""
+
     def __init__(self, store: QueueStore) -> None:
         self.store = store
+        self.stop = threading.Event()
         self._pending: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()
         self._wake = threading.Event()
-        self._stop = threading.Event()
         self._retry_pause = threading.Event()  # never set: a plain interruptible pause
-        self._thread = threading.Thread(target=self._run, name="queue-writer", daemon=True)
         self.events_dropped = 0
-
-    def start(self) -> None:
-        self._thread.start()
 
     def put(self, event: dict[str, Any]) -> None:
         """Hand an event over; never blocks on disk."""
@@ -55,26 +54,23 @@ class QueueWriter:
             self._pending.append(event)
         self._wake.set()
 
-    def stop(self, timeout_s: float = 10.0) -> None:
-        """Write what was handed over, then stop."""
-        self._stop.set()
+    def request_stop(self) -> None:
+        """Write what was handed over, then let ``run`` return."""
+        self.stop.set()
         self._wake.set()
-        self._thread.join(timeout_s)
-
-    def alive(self) -> bool:
-        return self._thread.is_alive()
 
     def backlog(self) -> int:
         with self._lock:
             return len(self._pending)
 
-    def _run(self) -> None:
+    def run(self, beat: Callable[[], None]) -> None:
         while True:
-            self._wake.wait()
+            self._wake.wait(IDLE_BEAT_S)
             self._wake.clear()
             while self._write_group():
-                pass
-            if self._stop.is_set() and not self.backlog():
+                beat()
+            beat()
+            if self.stop.is_set() and not self.backlog():
                 return
 
     def _write_group(self) -> bool:

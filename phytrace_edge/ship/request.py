@@ -1,7 +1,8 @@
-"""One HTTP request for a batch: body, compression, headers. Pure functions.
+"""One HTTP request for a batch: body, compression, headers.
 
 The body is assembled from the events' JSON as stored in the queue, without decoding
-and re-encoding them: ``{"events": [<json>, <json>, ...]}``.
+and re-encoding them: ``{"events": [<json>, <json>, ...]}``. python-zstandard's
+compressors must not be shared between threads, so each sender owns a ``BodyEncoder``.
 """
 
 from __future__ import annotations
@@ -13,12 +14,11 @@ from collections.abc import Sequence
 import zstandard
 
 from phytrace_edge import __version__
-from phytrace_edge.queue import QueuedEvent
+from phytrace_edge.queue.records import QueuedEvent
 
 GZIP_LEVEL = 6
 ZSTD_LEVEL = 3
 USER_AGENT = f"phytrace-edge/{__version__}"
-_zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
 
 
 def events_body(events: Sequence[QueuedEvent]) -> bytes:
@@ -26,13 +26,20 @@ def events_body(events: Sequence[QueuedEvent]) -> bytes:
     return b'{"events":[' + b",".join(event.json for event in events) + b"]}"
 
 
-def encode_body(body: bytes, encoding: str) -> bytes:
-    """``body`` compressed for ``Content-Encoding: encoding`` (gzip, zstd or none)."""
-    if encoding == "gzip":
-        return gzip.compress(body, GZIP_LEVEL, mtime=0)
-    if encoding == "zstd":
-        return _zstd.compress(body)
-    return body
+class BodyEncoder:
+    """Compresses request bodies for ``Content-Encoding: encoding`` (gzip, zstd or
+    none); one per thread."""
+
+    def __init__(self, encoding: str) -> None:
+        self.encoding = encoding
+        self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL) if encoding == "zstd" else None
+
+    def encode(self, body: bytes) -> bytes:
+        if self.encoding == "gzip":
+            return gzip.compress(body, GZIP_LEVEL, mtime=0)
+        if self._zstd is not None:
+            return self._zstd.compress(body)
+        return body
 
 
 def idempotency_key(events: Sequence[QueuedEvent]) -> str:

@@ -30,8 +30,10 @@ from typing import Any
 from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
 
 from phytrace_edge.errors import EndpointRefusedError, TransientSendError
-from phytrace_edge.queue import Batch, DeadLetter, QueuedEvent, QueueStore
-from phytrace_edge.ship.request import encode_body, events_body, request_headers
+from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.ship.options import SendPolicy
+from phytrace_edge.ship.request import BodyEncoder, events_body, request_headers
 from phytrace_edge.ship.responses import Accepted, Refused, classify
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import Transport
@@ -40,20 +42,8 @@ log = logging.getLogger(__name__)
 
 RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same time spreads
 POLL_INTERVAL_S = 0.25
+BEAT_S = 1.0
 LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
-
-
-@dataclass(frozen=True)
-class SendPolicy:
-    """How batches are formed and retried (BATCH_SIZE, BATCH_MAX_BYTES, ...)."""
-
-    batch_size: int = 10
-    batch_max_bytes: int = 1024 * 1024
-    flush_interval_s: float = 2.0
-    retry_min_s: float = 0.5
-    retry_max_s: float = 60.0
-    http_compression: str = "gzip"
-    upload_max_bps: int | None = None
 
 
 @dataclass
@@ -116,23 +106,28 @@ class Sender:
         self.stats = SendStats()
         self._clock = clock
         self._rng = rng or random.Random()
-        self._pause = sleep or self.stop.wait
+        self._pause = sleep or self._wait_beating
+        self._beat: Callable[[], None] = lambda: None
         self._deadline: float | None = None
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
+        self._encoder = BodyEncoder(policy.http_compression)
         self._backoff = wait_random_exponential(
             multiplier=policy.retry_min_s, max=policy.retry_max_s
         )
 
     # ------------------------------------------------------------------ loops
 
-    def run(self) -> None:
+    def run(self, beat: Callable[[], None] = lambda: None) -> None:
         """Send until ``stop`` is set; the backlog drains on a timer, not only when new
-        events arrive."""
+        events arrive. ``beat`` is called as the loop makes progress (and while it
+        waits out a backoff), for the supervisor."""
+        self._beat = beat
         while not self.stop.is_set():
             try:
                 sent = self.send_next_batch(flush=self.flushing.is_set())
             except Stopped:
                 return
+            beat()
             if not sent:
                 self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
 
@@ -150,11 +145,11 @@ class Sender:
                     break
                 if progress is not None and sent:
                     progress(sent)
-                if not sent and self.store.stats_counter("depth") == 0:
+                if not sent and self.store.counter("depth") == 0:
                     return True
                 if not sent:
                     self.stop.wait(POLL_INTERVAL_S)  # another process holds what is left
-            return self.store.stats_counter("depth") == 0
+            return self.store.counter("depth") == 0
         finally:
             self._deadline = None
 
@@ -215,7 +210,7 @@ class Sender:
 
     def _send_with_retries(self, batch: Batch, events: Sequence[QueuedEvent]) -> Accepted | Refused:
         body = events_body(events)
-        encoded = encode_body(body, self.policy.http_compression)
+        encoded = self._encoder.encode(body)
         headers = request_headers(events, self.policy.http_compression)
         retrying = Retrying(
             retry=retry_if_exception_type(TransientSendError),
@@ -247,6 +242,12 @@ class Sender:
             return exc.retry_after * (1 + RETRY_AFTER_JITTER * self._rng.random())
         return float(self._backoff(state))
 
+    def _wait_beating(self, seconds: float) -> None:
+        """Wait ``seconds`` or until stopped, beating at least once a second."""
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0 and not self.stop.wait(min(left, BEAT_S)):
+            self._beat()
+
     def _sleep(self, seconds: float) -> None:
         """Sleep, but wake up at once when asked to stop or at the drain's deadline."""
         if self._deadline is not None:
@@ -267,7 +268,7 @@ class Sender:
             log.error(
                 "%s; keeping %d queued event(s), retrying in %.0f s",
                 exc,
-                self.store.stats_counter("depth"),
+                self.store.counter("depth"),
                 state.upcoming_sleep,
             )
         elif state.attempt_number == 1 or state.attempt_number % 10 == 0:

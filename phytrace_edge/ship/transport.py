@@ -16,8 +16,8 @@ from urllib.parse import urlsplit
 
 import httpx
 
-from phytrace_edge.config import Secret
 from phytrace_edge.errors import EndpointRefusedError, TransientSendError
+from phytrace_edge.redact import Secret
 from phytrace_edge.ship.responses import Reply
 
 log = logging.getLogger(__name__)

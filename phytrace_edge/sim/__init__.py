@@ -1,5 +1,3 @@
-"""The simulated delivery robot, the mock rclpy layer it runs on, and ``run_simulation``."""
-
-from phytrace_edge.sim.runner import run_simulation
-
-__all__ = ["run_simulation"]
+"""The simulated delivery robot (``world``, ``robot``), the mock rclpy layer it runs on
+(``mock_ros``) and its rosbag2 recorder. It depends on nothing of the bridge: the
+bridge hears it through ``ingest/sources/sim.py``."""

@@ -8,13 +8,22 @@ serialised to CDR, so the bag is what ``ros2 bag record`` would have written.
 from __future__ import annotations
 
 import array
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from phytrace_edge.ingest.topics import TOPIC_BY_NAME
-from phytrace_edge.sim.mock_ros import Context, SingleThreadedExecutor, init, ros_api, shutdown
+from phytrace_edge.sim.mock_ros import (
+    Clock,
+    ClockType,
+    Context,
+    SingleThreadedExecutor,
+    create_node,
+    init,
+    qos,
+    shutdown,
+)
 from phytrace_edge.sim.mock_ros.messages import Message
 from phytrace_edge.sim.robot import DeliveryRobot
 from phytrace_edge.sim.world import World
@@ -66,18 +75,22 @@ def record_simulation(
     context = Context(virtual_time=True)
     init(context=context)
     try:
-        api = ros_api(context)
-        robot_node = api.create_node("delivery_robot")
+        robot_node = create_node("delivery_robot", context=context)
         robot = DeliveryRobot(robot_node, World.create(seed))
-        robot_node.create_timer(1.0 / robot.tick_hz, robot.tick, clock=api.clock("steady"))
-        recorder = api.create_node("recorder")
-        system = api.clock("system")
-        for topic, spec in TOPIC_BY_NAME.items():
+        steady = Clock(clock_type=ClockType.STEADY_TIME, source=context.time_source)
+        robot_node.create_timer(1.0 / robot.tick_hz, robot.tick, clock=steady)
+        recorder = create_node("recorder", context=context)
+        system = Clock(clock_type=ClockType.SYSTEM_TIME, source=context.time_source)
+
+        def keep(topic: str) -> Callable[[Message], None]:
+            return lambda msg: records.append((topic, system.now().nanoseconds, msg))
+
+        for topic, publisher in robot.pub.items():
             recorder.create_subscription(
-                api.message_type(spec.type_name),
+                publisher.msg_type,
                 topic,
-                lambda msg, t=topic: records.append((t, system.now().nanoseconds, msg)),
-                api.qos.QoSProfile(depth=1000, reliability=api.qos.ReliabilityPolicy.BEST_EFFORT),
+                keep(topic),
+                qos.QoSProfile(depth=1000, reliability=qos.ReliabilityPolicy.BEST_EFFORT),
             )
         executor = SingleThreadedExecutor(context, [robot_node, recorder])
         while robot.ticks < seconds * robot.tick_hz:
@@ -89,8 +102,8 @@ def record_simulation(
     counts: dict[str, int] = {}
     with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
         connections = {
-            topic: writer.add_connection(topic, spec.type_name, typestore=typestore)
-            for topic, spec in TOPIC_BY_NAME.items()
+            topic: writer.add_connection(topic, publisher.msg_type._type, typestore=typestore)
+            for topic, publisher in robot.pub.items()
         }
         custom = writer.add_connection(CUSTOM_TOPIC, CUSTOM_TYPE, typestore=typestore)
         for topic, stamp_ns, msg in records:

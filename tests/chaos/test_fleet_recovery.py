@@ -9,11 +9,15 @@ import time
 from collections import Counter
 from pathlib import Path
 
-from phytrace_edge.config import MIB, Secret
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.ship import HttpTransport, Sender, SendPolicy
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship.options import SendPolicy
+from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.transport import HttpTransport
 from phytrace_edge.udm.event import new_event_id
+from phytrace_edge.units import MIB
 from tests.processes import wait_for
 
 ROBOTS = 20

@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 from phytrace_edge.config import load_settings
-from phytrace_edge.runtime.service import BridgeService, http_transport, open_queue, send_policy
-from phytrace_edge.ship import Sender
+from phytrace_edge.runtime.wiring import build_service, http_transport, open_queue, send_policy
+from phytrace_edge.ship.sender import Sender
 from tests.processes import wait_for
 
 KILLS = 5
@@ -54,7 +54,7 @@ def test_stub_killed_five_times_loses_nothing(tmp_path: Path, stub) -> None:
     rng = random.Random(42)
     built: list[str] = []
     settings = bridge_settings(tmp_path, stub.endpoint)
-    service = BridgeService(settings, on_event=lambda event: built.append(event["event_id"]))
+    service = build_service(settings, {}, on_event=lambda event: built.append(event["event_id"]))
     service.start()
     try:
         for kill in range(KILLS):
@@ -86,7 +86,7 @@ def test_stub_killed_five_times_loses_nothing(tmp_path: Path, stub) -> None:
 def test_503_with_retry_after_for_a_while_then_recovery(tmp_path: Path, stub) -> None:
     built: list[str] = []
     settings = bridge_settings(tmp_path, stub.endpoint, SAMPLE_RATE_HZ="20")
-    service = BridgeService(settings, on_event=lambda event: built.append(event["event_id"]))
+    service = build_service(settings, {}, on_event=lambda event: built.append(event["event_id"]))
     stub.set_faults(fixed_status=503, retry_after="1")
     service.start()
     try:
@@ -104,7 +104,7 @@ def test_503_with_retry_after_for_a_while_then_recovery(tmp_path: Path, stub) ->
 def test_401_for_a_while_drops_nothing(tmp_path: Path, stub) -> None:
     built: list[str] = []
     settings = bridge_settings(tmp_path, stub.endpoint, SAMPLE_RATE_HZ="20", RETRY_MAX_S="0.3")
-    service = BridgeService(settings, on_event=lambda event: built.append(event["event_id"]))
+    service = build_service(settings, {}, on_event=lambda event: built.append(event["event_id"]))
     stub.set_faults(fixed_status=401)
     service.start()
     try:

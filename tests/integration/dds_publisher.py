@@ -18,8 +18,8 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from phytrace_edge.ingest import dds_types as t
-from phytrace_edge.ingest.dds import dds_topic_name, domain_settings
+from phytrace_edge.ingest.sources import dds_types as t
+from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
 
 BEST_EFFORT = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
 RELIABLE = Qos(
@@ -128,8 +128,8 @@ def samples() -> dict[str, tuple[object, Qos]]:
 
 
 def main() -> None:
-    domain_id, config = domain_settings(os.environ)
-    domain = Domain(domain_id, config) if config else None
+    domain_id, localhost = domain_settings(os.environ)
+    domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
     participant = DomainParticipant(domain_id)
     writers = []
     for topic_name, (sample, qos) in samples().items():

@@ -16,8 +16,9 @@ from pathlib import Path
 
 import orjson
 
-from phytrace_edge.config import GIB, MIB
-from phytrace_edge.queue import QueueLimits, QueueStore
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import GIB, MIB
 
 LIMITS = QueueLimits(max_bytes=GIB)
 SEND_S = 0.002
@@ -65,7 +66,7 @@ def rss_kib() -> int:
 
 
 def rss(path: str, count: int) -> None:
-    from phytrace_edge.sim import run_simulation
+    from phytrace_edge import run_simulation
 
     samples: list[dict] = []
     run_simulation(50, sink=samples.append)

@@ -11,14 +11,16 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.build import Identity, UDMBuilder
-from phytrace_edge.config import KNOWN_TOPICS
+from phytrace_edge import run_simulation
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.options import BuilderOptions, Identity
+from phytrace_edge.config.parsers import KNOWN_TOPICS
 from phytrace_edge.errors import ConfigError
-from phytrace_edge.ingest.bag import BagClock, replay
 from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.sim import run_simulation
+from phytrace_edge.ingest.sources.bag import BagClock, replay
+from phytrace_edge.ingest.sources.base import Feed
 from phytrace_edge.sim.recorder import CUSTOM_TOPIC, record_simulation
-from phytrace_edge.udm import find_violation
+from phytrace_edge.udm.schema import find_violation
 from tests.conftest import DOMAINS
 from tests.processes import python_env
 
@@ -37,19 +39,16 @@ def bag(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 def replay_events(path: Path, rate: float = 0) -> tuple[list[dict], object]:
     clock = BagClock()
     builder = UDMBuilder(
-        Identity("delivery-robot-001", "delivery_robot"), stale_after_s=5.0, clock=clock
+        BuilderOptions(Identity("delivery-robot-001", "delivery_robot"), stale_after_s=5.0),
+        clock=clock,
     )
     dispatcher = Dispatcher(builder.add_reading)
     events: list[dict] = []
+    feed = Feed(
+        dispatcher.on_message, lambda at: events.append(builder.build_event(captured_at_s=at)), 0.2
+    )
     summary = replay(
-        str(path),
-        {t: t for t in KNOWN_TOPICS},
-        dispatcher.on_message,
-        lambda at: events.append(builder.build_event(captured_at_s=at)),
-        clock,
-        sample_rate_hz=5.0,
-        rate=rate,
-        stop=threading.Event(),
+        str(path), {t: t for t in KNOWN_TOPICS}, feed, clock, rate=rate, stop=threading.Event()
     )
     return events, summary
 

@@ -7,6 +7,7 @@ import os
 import random
 import subprocess
 import sys
+import threading
 import typing
 from pathlib import Path
 
@@ -16,11 +17,16 @@ pytest.importorskip("cyclonedds", reason="the DDS input needs cyclonedds (pip in
 
 from cyclonedds.idl import IdlStruct
 
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import load_settings
-from phytrace_edge.ingest import dds_types
-from phytrace_edge.ingest.dds import domain_settings
-from phytrace_edge.runtime.sources import DdsSource
-from phytrace_edge.udm import find_violation
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.sources import dds_types
+from phytrace_edge.ingest.sources.base import Feed
+from phytrace_edge.ingest.sources.dds import DdsSource, domain_settings
+from phytrace_edge.runtime import wiring
+from phytrace_edge.udm.schema import find_violation
 from tests.conftest import DOMAINS
 from tests.processes import python_env, wait_for
 
@@ -77,10 +83,11 @@ def test_idl_types_match_the_jazzy_definitions(idl: type) -> None:
 
 
 def test_ros_environment_picks_the_domain_and_loopback() -> None:
-    assert domain_settings({}) == (0, None)
-    domain, config = domain_settings({"ROS_DOMAIN_ID": "7", "ROS_LOCALHOST_ONLY": "1"})
-    assert domain == 7 and "127.0.0.1" in config
-    assert domain_settings({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})[1] is not None
+    assert domain_settings({}) == (0, False)
+    assert domain_settings({"ROS_DOMAIN_ID": "7", "ROS_LOCALHOST_ONLY": "1"}) == (7, True)
+    assert domain_settings({"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})[1] is True
+    with pytest.raises(ConfigError, match="ROS_DOMAIN_ID"):
+        domain_settings({"ROS_DOMAIN_ID": "seven"})
 
 
 def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -96,11 +103,16 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
     )
     events: list[dict] = []
     source = None
+    stop = threading.Event()
     try:
         assert publisher.stdout.readline().strip() == "ready"
-        settings = load_settings(env={"SAMPLE_RATE_HZ": "10"}).settings
-        source = DdsSource(settings, events.append)
-        source.start()
+        settings = load_settings(env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds"}).settings
+        source = DdsSource(wiring.source_options(settings, os.environ))
+        builder = UDMBuilder(wiring.builder_options(settings))
+        dispatcher = Dispatcher(builder.add_reading)
+        sampler = Sampler(builder, events.append, 10, before_tick=source.before_tick)
+        source.start(Feed(dispatcher.on_message, sampler.tick, sampler.period_s))
+        threading.Thread(target=sampler.run, args=(stop,), daemon=True).start()
         wanted = set(DOMAINS)
         event = wait_for(
             lambda: next((e for e in reversed(events) if wanted <= set(e)), None),
@@ -108,6 +120,7 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
             "an event with every domain",
         )
     finally:
+        stop.set()
         if source is not None:
             source.stop()
         publisher.stdin.close()
@@ -137,5 +150,5 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
     assert [j["name"] for j in event["actuators"]["joints"]] == ["left_wheel", "right_wheel"]
     assert event["payload"]["delivery_state"] == "in_transit"
     assert event["location"]["sources"][0]["stamp"] == "2025-11-13T02:13:20.500Z"
-    received = source.bridge.dispatcher.received
+    received = dispatcher.received
     assert received["/odom"] > 0 and received["/battery_state"] > 0  # best effort and reliable

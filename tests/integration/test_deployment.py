@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from phytrace_edge.runtime.service import warn_if_not_on_a_volume
+from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
 from tests.processes import BridgeProcess
 
 ROOT = Path(__file__).parents[2]

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from jsonschema import Draft202012Validator
 from openapi_spec_validator import validate
 
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
 from phytrace_edge.stub.app import Stub, create_app
 from phytrace_edge.stub.faults import Faults
 from phytrace_edge.stub.store import StubStore

@@ -15,8 +15,9 @@ from pathlib import Path
 import orjson
 import pytest
 
-from phytrace_edge.config import GIB
-from phytrace_edge.queue import QueueLimits, QueueStore
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import GIB
 
 WORKER = str(Path(__file__).with_name("queue_worker.py"))
 ROOT = str(Path(__file__).parents[2])
@@ -63,7 +64,7 @@ def test_acknowledged_puts_survive_kill_9(tmp_path: Path) -> None:
         assert check.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
         check.close()
         store = QueueStore.open(path, limits=QueueLimits(max_bytes=GIB))
-        rows = store.read("SELECT codec, dict_id, body FROM events")
+        rows = store._db.read("SELECT codec, dict_id, body FROM events")
         queued = {orjson.loads(store.codecs.decode(*row))["seq"] for row in rows}
         assert store.stats().depth == len(rows)  # the counters survived the kill too
         store.close()

@@ -8,9 +8,14 @@ import math
 
 import pytest
 
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings
-from phytrace_edge.runtime.ros_node import GRAPH_CHECK_S, BridgeNode
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.sources.ros_graph import GRAPH_CHECK_S, NodeClock, subscribe_topics
+from phytrace_edge.ingest.sources.sim import mock_api
+from phytrace_edge.runtime import wiring
 from phytrace_edge.sim import mock_ros
 from phytrace_edge.sim.mock_ros import messages as m
 from phytrace_edge.sim.mock_ros.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -23,18 +28,29 @@ LATCHED = QoSProfile(
 
 
 class Graph:
-    """A virtual-time ROS graph with the bridge node on it."""
+    """A virtual-time ROS graph with the bridge's subscriptions and sample tick on it."""
 
     def __init__(self, **env: str) -> None:
         self.context = mock_ros.Context(virtual_time=True)
         mock_ros.init(context=self.context)
-        self.api = mock_ros.ros_api(self.context)
+        self.api = mock_api(self.context)
         self.robot = self.api.create_node("robot")
         self.events: list[dict] = []
-        self.bridge = BridgeNode(self.api, load_settings(env=env).settings, self.events.append)
-        self.executor = mock_ros.SingleThreadedExecutor(
-            self.context, [self.robot, self.bridge.node]
+        settings = load_settings(env=env).settings
+        options = wiring.source_options(settings, {})
+        builder = UDMBuilder(wiring.builder_options(settings), clock=NodeClock(self.api))
+        self.dispatcher = Dispatcher(builder.add_reading)
+        node = self.api.create_node("phytrace_edge")
+        self.subscriber = subscribe_topics(
+            self.api,
+            node,
+            dict(options.topics),
+            self.dispatcher.on_message,
+            dict(options.qos_overrides),
         )
+        sampler = Sampler(builder, self.events.append, settings.sample_rate_hz)
+        node.create_timer(sampler.period_s, sampler.tick, clock=self.api.clock("steady"))
+        self.executor = mock_ros.SingleThreadedExecutor(self.context, [self.robot, node])
 
     def run(self, seconds: float) -> None:
         end = self.context.time_source.steady_ns() + int(seconds * 1e9)
@@ -42,10 +58,10 @@ class Graph:
             self.executor.spin_once(timeout_sec=0.05)
 
     def received(self, topic: str) -> int:
-        return self.bridge.dispatcher.received[topic]
+        return self.dispatcher.received[topic]
 
     def subscription(self, topic: str):
-        return self.bridge.subscriber.subscribed.get(topic)
+        return self.subscriber.subscribed.get(topic)
 
     def close(self) -> None:
         mock_ros.shutdown(context=self.context)
@@ -126,7 +142,7 @@ def test_an_override_that_cannot_match_is_counted(graph) -> None:
     publisher.publish(m.LaserScan())
     g.run(0.5)
     assert g.received("/scan") == 0
-    assert g.bridge.qos_incompatible == {"/scan": 1}
+    assert g.subscriber.qos_incompatible == {"/scan": 1}
 
 
 def test_remap_disable_and_namespace(graph) -> None:

@@ -10,11 +10,14 @@ import httpx
 import orjson
 import pytest
 
-from phytrace_edge.config import MIB, Secret
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.queue.dead_letters import DeadLetterBox
-from phytrace_edge.ship import HttpTransport, Sender, SendPolicy
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship.options import SendPolicy
+from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.transport import HttpTransport
+from phytrace_edge.units import MIB
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +100,7 @@ def test_one_poisoned_event_in_a_batch_of_500(queue, stub, sim_events) -> None:
     sender = make_sender(queue, stub, batch_size=500)
     assert sender.drain(deadline=time.monotonic() + 60) is True
     assert stub.stats()["unique"] == 499
-    (letter,) = DeadLetterBox(queue).list()
+    (letter,) = queue.dead_letters.list()
     assert letter.event_id == events[317]["event_id"] and letter.status_code == 400
     assert "/power/battery/state_of_charge_pct" in (letter.response or "")
 
@@ -108,7 +111,7 @@ def test_partial_rejections_in_a_200_are_dead_lettered(queue, stub_factory, sim_
     queue.put_many([sim_events[0], bad, sim_events[2]])
     assert make_sender(queue, stub).drain(deadline=time.monotonic() + 30) is True
     assert stub.stats()["unique"] == 2
-    (letter,) = DeadLetterBox(queue).list()
+    (letter,) = queue.dead_letters.list()
     assert letter.event_id == bad["event_id"] and "source_type" in letter.reason
 
 

@@ -8,9 +8,9 @@ import sys
 import orjson
 import pytest
 
+from phytrace_edge import run_simulation
 from phytrace_edge.config import load_settings
-from phytrace_edge.sim import run_simulation
-from phytrace_edge.udm import find_violation
+from phytrace_edge.udm.schema import find_violation
 
 ALL_TOPICS = [
     "/battery_state",

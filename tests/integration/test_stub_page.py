@@ -13,7 +13,7 @@ import httpx
 import orjson
 import pytest
 
-from phytrace_edge.sim import run_simulation
+from phytrace_edge import run_simulation
 from phytrace_edge.udm.event import new_event_id
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -8,9 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.config import Secret, load_settings
+from phytrace_edge.config import load_settings
 from phytrace_edge.errors import EndpointRefusedError
-from phytrace_edge.ship import HttpTransport
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship.transport import HttpTransport
 
 
 def openssl(*args: str) -> None:

@@ -6,9 +6,10 @@ import threading
 
 import pytest
 
-from phytrace_edge.build import Identity, UDMBuilder
-from phytrace_edge.build.assemble import classify_stamp
-from phytrace_edge.udm import find_violation
+from phytrace_edge.builder.assemble import classify_stamp
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.options import BuilderOptions, Identity
+from phytrace_edge.udm.schema import find_violation
 from tests.conftest import FakeClock
 
 IDENTITY = Identity("bot-1", "amr", fleet_id="fleet-a")
@@ -34,7 +35,7 @@ def delivery(state: str, order: str = "order-1") -> dict:
 
 @pytest.fixture
 def builder(clock: FakeClock) -> UDMBuilder:
-    return UDMBuilder(IDENTITY, stale_after_s=5.0, clock=clock)
+    return UDMBuilder(BuilderOptions(IDENTITY, stale_after_s=5.0), clock=clock)
 
 
 def test_no_topics_means_no_domains(builder: UDMBuilder) -> None:
@@ -193,7 +194,7 @@ def test_captured_at_override_for_replay(builder: UDMBuilder) -> None:
 
 
 def test_concurrent_callbacks_and_ticks(clock: FakeClock) -> None:
-    builder = UDMBuilder(IDENTITY, stale_after_s=5.0, clock=clock)
+    builder = UDMBuilder(BuilderOptions(IDENTITY, stale_after_s=5.0), clock=clock)
     per_thread = 2000
     errors_seen: list[dict] = []
 

@@ -8,8 +8,10 @@ import orjson
 import pytest
 
 from phytrace_edge.cli import main
-from phytrace_edge.config import MIB
-from phytrace_edge.queue import DeadLetter, QueueLimits, QueueStore
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.records import DeadLetter
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import MIB
 
 
 @pytest.fixture

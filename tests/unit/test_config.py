@@ -10,7 +10,10 @@ from pathlib import Path
 import pytest
 
 from phytrace_edge.cli import main
-from phytrace_edge.config import GIB, MIB, ConfigError, Secret, load_settings, setting_infos
+from phytrace_edge.config import load_settings, setting_infos
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.redact import Secret
+from phytrace_edge.units import GIB, MIB
 
 
 def test_defaults_match_the_reference_guide() -> None:

@@ -11,10 +11,12 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from phytrace_edge.build import Identity, UDMBuilder
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.errors import MalformedMessage
+from phytrace_edge.ingest import handlers
 from phytrace_edge.ingest.topics import TOPICS
-from phytrace_edge.udm import find_violation
+from phytrace_edge.udm.schema import find_violation
 from tests.conftest import FakeClock, non_finite_values
 
 hostile_float = st.one_of(
@@ -153,7 +155,7 @@ MESSAGES = {
 def _handle(topic: str, msg: Any) -> dict | None:
     spec = next(spec for spec in TOPICS if spec.name == topic)
     try:
-        reading = spec.handler(msg)
+        reading = getattr(handlers, spec.handler)(msg)
     except MalformedMessage:
         return None
     reading.pop("rejected_fields", None)
@@ -163,7 +165,9 @@ def _handle(topic: str, msg: Any) -> dict | None:
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_every_handler_survives_hostile_input_and_events_stay_valid(data: st.DataObject) -> None:
-    builder = UDMBuilder(Identity("bot", "amr"), stale_after_s=5.0, clock=FakeClock())
+    builder = UDMBuilder(
+        BuilderOptions(Identity("bot", "amr"), stale_after_s=5.0), clock=FakeClock()
+    )
     for topic, strategy in MESSAGES.items():
         reading = _handle(topic, data.draw(strategy, label=topic))
         if reading is None:

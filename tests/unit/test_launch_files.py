@@ -72,7 +72,7 @@ def test_launch_files_pass_the_reference_parameters(
     (process,) = [a for a in actions if "cmd" in a.kwargs]
     values = {**declared, "source_id": "launched-bot", "sample_rate_hz": "10.0"}
     command = [resolve(part, values) for part in process.kwargs["cmd"]]
-    assert command[:4] == ["phytrace-edge", "run", "--bridge-input", bridge_input]
+    assert command[:4] == ["phytrace-edge", "run", "--input", bridge_input]
     ros_args = command[command.index("--ros-args") + 1 :]
     loaded = settings_from_environment(env={}, ros_params=ros_parameters(ros_args))
     assert loaded.settings.source_id == "launched-bot"

@@ -13,8 +13,10 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.stateful import Bundle, RuleBasedStateMachine, consumes, invariant, rule
 
-from phytrace_edge.config import GIB, MIB
-from phytrace_edge.queue import Batch, QueueLimits, QueueStore
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.records import Batch
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import GIB, MIB
 
 
 class QueueMachine(RuleBasedStateMachine):

@@ -17,13 +17,14 @@ import orjson
 import pytest
 import zstandard
 
-from phytrace_edge.config import MIB
 from phytrace_edge.errors import QueueBusyError
-from phytrace_edge.queue import DeadLetter, QueueLimits, QueueStore
 from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
-from phytrace_edge.queue.dead_letters import DeadLetterBox
 from phytrace_edge.queue.migrate import migrate, migration_files
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.records import DeadLetter
 from phytrace_edge.queue.recovery import connect
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.units import MIB
 
 
 class Clock:
@@ -75,7 +76,7 @@ def test_file_is_private_wal_and_in_a_created_directory(open_store) -> None:
     assert stat.S_IMODE(store.path.stat().st_mode) == 0o600
     wal = Path(f"{store.path}-wal")
     assert wal.exists() and stat.S_IMODE(wal.stat().st_mode) == 0o600
-    assert store.read("PRAGMA journal_mode")[0][0] == "wal"
+    assert store._db.read("PRAGMA journal_mode")[0][0] == "wal"
 
 
 def test_warns_when_the_volume_is_smaller_than_the_cap(
@@ -213,7 +214,7 @@ def test_ttl_expires_old_events_but_not_leased_ones(open_store, clock: Clock) ->
 def test_rows_stay_readable_when_compression_changes(open_store, first: str, then: str) -> None:
     store = open_store(compression=first)
     store.put_many([event(i, pad=300) for i in range(3)])
-    codec = store.read("SELECT codec FROM events LIMIT 1")[0][0]
+    codec = store._db.read("SELECT codec FROM events LIMIT 1")[0][0]
     assert codec == {"none": NONE, "gzip": GZIP, "zstd": ZSTD_DICT}[first]
     store.close()
     reopened = open_store(compression=then)
@@ -222,7 +223,7 @@ def test_rows_stay_readable_when_compression_changes(open_store, first: str, the
 
 
 def test_zstd_dictionary_shrinks_events_and_is_kept_in_the_database(open_store) -> None:
-    from phytrace_edge.sim import run_simulation
+    from phytrace_edge import run_simulation
 
     events: list[dict] = []
     run_simulation(100, sink=events.append)
@@ -231,9 +232,9 @@ def test_zstd_dictionary_shrinks_events_and_is_kept_in_the_database(open_store) 
     stats = store.stats()
     json_bytes = sum(len(orjson.dumps(e)) for e in events)
     assert stats.stored_bytes * 5 < json_bytes  # at least 5x smaller at rest
-    (dict_id,) = store.read("SELECT DISTINCT dict_id FROM events")[0]
+    (dict_id,) = store._db.read("SELECT DISTINCT dict_id FROM events")[0]
     assert (
-        store.read("SELECT count(*) FROM zstd_dictionaries WHERE dict_id = ?", (dict_id,))[0][0]
+        store._db.read("SELECT count(*) FROM zstd_dictionaries WHERE dict_id = ?", (dict_id,))[0][0]
         == 1
     )
 
@@ -243,7 +244,7 @@ def test_rows_of_a_retired_dictionary_stay_readable(open_store) -> None:
     old = zstandard.train_dictionary(4096, samples)
     store = open_store()
     body = zstandard.ZstdCompressor(dict_data=old).compress(orjson.dumps(event(7)))
-    with store.transaction() as cursor:
+    with store._db.transaction() as cursor:
         cursor.execute(
             "INSERT INTO zstd_dictionaries VALUES (?, ?, 0)", (old.dict_id(), old.as_bytes())
         )
@@ -267,7 +268,7 @@ def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> Non
     assert (stats.depth, stats.acked_total, stats.dead_letters) == (0, 3, 1)
     assert stats.drops == {"rejected": 1}
 
-    box = DeadLetterBox(store)
+    box = store.dead_letters
     (info,) = box.list()
     assert (info.event_id, info.reason, info.status_code) == (poison.event_id, "rejected: 422", 422)
     out = io.BytesIO()
@@ -339,7 +340,7 @@ def test_locked_queue_waits_for_the_lock_then_gives_up(tmp_path: Path, clock: Cl
     released.set()
     assert slow.put(event(2)).accepted == 1  # retried inside the busy timeout
     waiter.join()
-    assert store.read("PRAGMA integrity_check")[0][0] == "ok"
+    assert store._db.read("PRAGMA integrity_check")[0][0] == "ok"
     assert store.stats().depth == 1
     store.close()
     slow.close()
@@ -351,22 +352,22 @@ def test_disk_full_is_survived_counted_and_recovers(open_store) -> None:
         limits=QueueLimits(max_bytes=64 * MIB, on_full="drop_newest"), compression="none"
     )
     store.put_many([event(i, pad=1000) for i in range(20)])
-    pages = store.read("PRAGMA page_count")[0][0]
-    store.read(f"PRAGMA max_page_count = {pages}")  # the "disk" is now full
+    pages = store._db.read("PRAGMA page_count")[0][0]
+    store._db.read(f"PRAGMA max_page_count = {pages}")  # the "disk" is now full
     result = store.put_many([event(i, pad=4000) for i in range(20, 30)])
     assert (result.accepted, result.dropped) == (0, 10)
     assert store.stats().drops == {"disk_full": 10}
     assert store.stats().depth == 20
-    store.read(f"PRAGMA max_page_count = {pages * 100}")  # space returns
+    store._db.read(f"PRAGMA max_page_count = {pages * 100}")  # space returns
     assert store.put(event(99)).accepted == 1
-    assert store.read("PRAGMA integrity_check")[0][0] == "ok"
+    assert store._db.read("PRAGMA integrity_check")[0][0] == "ok"
 
 
 def test_disk_full_with_drop_oldest_evicts_to_keep_new_data(open_store) -> None:
     store = open_store(compression="none")
     store.put_many([event(i, pad=3000) for i in range(40)])
-    pages = store.read("PRAGMA page_count")[0][0]
-    store.read(f"PRAGMA max_page_count = {pages}")
+    pages = store._db.read("PRAGMA page_count")[0][0]
+    store._db.read(f"PRAGMA max_page_count = {pages}")
     assert store.put(event(100, pad=3000)).accepted == 1
     stats = store.stats()
     assert stats.drops["disk_full"] >= 1
@@ -391,7 +392,7 @@ def test_a_database_of_the_first_migration_is_upgraded(tmp_path: Path) -> None:
     )
     old.close()
     store = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB))
-    assert store.read("PRAGMA user_version")[0][0] == len(migration_files())
+    assert store._db.read("PRAGMA user_version")[0][0] == len(migration_files())
     batch = store.claim_batch(5, MIB)
     assert seqs(batch) == [1]
     store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 422", 422)])
@@ -441,7 +442,7 @@ def test_stats_are_readable_from_another_connection_during_a_write(open_store) -
     store = open_store()
     store.put_many([event(i) for i in range(10)])
     reader = sqlite3.connect(f"file:{store.path}?mode=ro", uri=True)
-    with store.transaction() as cursor:
+    with store._db.transaction() as cursor:
         cursor.execute("DELETE FROM events")  # uncommitted
         depth = reader.execute("SELECT value FROM counters WHERE name = 'depth'").fetchone()[0]
     assert depth == 10

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.udm import check_event, find_violation, load_schema
 from phytrace_edge.udm.event import format_timestamp, new_event_id
+from phytrace_edge.udm.schema import check_event, find_violation, load_schema
 from tests.conftest import DOMAINS
 
 REFERENCE_EVENT = json.loads(

@@ -14,14 +14,17 @@ import orjson
 import pytest
 import zstandard
 
-from phytrace_edge.config import MIB, Secret
 from phytrace_edge.errors import TransientSendError
-from phytrace_edge.queue import QueueLimits, QueueStore
-from phytrace_edge.queue.dead_letters import DeadLetterBox
-from phytrace_edge.ship import FunctionTransport, HttpTransport, Sender, SendPolicy
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.request import idempotency_key
 from phytrace_edge.ship.responses import Reply, parse_retry_after
+from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.throttle import Throttle
+from phytrace_edge.ship.transport import FunctionTransport, HttpTransport
+from phytrace_edge.units import MIB
 
 
 class FakeCloud:
@@ -165,7 +168,7 @@ def test_poison_event_is_isolated_and_dead_lettered(store) -> None:
     s = sender(store, cloud, batch_size=500)
     assert s.drain() is True
     assert len(cloud.stored) == 499 and "e00250" not in cloud.stored
-    (letter,) = DeadLetterBox(store).list()
+    (letter,) = store.dead_letters.list()
     assert letter.event_id == "e00250" and letter.status_code == 400
     assert s.stats.dead_lettered == 1 and store.stats().drops == {"rejected": 1}
     assert len(cloud.requests) <= 4  # split at the blamed index: before, it, after
@@ -188,7 +191,7 @@ def test_without_an_index_the_batch_is_bisected(store) -> None:
     s = Sender(store, FunctionTransport(no_index), SendPolicy(batch_size=64), sleep=lambda s: None)
     assert s.drain() is True
     assert set(cloud.stored) == {f"e{i:05d}" for i in range(64)} - bad
-    assert {d.event_id for d in DeadLetterBox(store).list()} == bad
+    assert {d.event_id for d in store.dead_letters.list()} == bad
     assert s.stats.batches_split > 2
 
 
@@ -210,7 +213,7 @@ def test_413_splits_until_it_fits(store) -> None:
     )
     assert s.drain() is True
     assert len(cloud.stored) == 40
-    (letter,) = DeadLetterBox(store).list()
+    (letter,) = store.dead_letters.list()
     assert letter.event_id == "e00040" and letter.status_code == 413
 
 
@@ -231,7 +234,7 @@ def test_per_event_rejections_in_a_2xx_are_dead_lettered(store) -> None:
         )
 
     Sender(store, FunctionTransport(partial), SendPolicy(), sleep=lambda s: None).drain()
-    (letter,) = DeadLetterBox(store).list()
+    (letter,) = store.dead_letters.list()
     assert letter.event_id == "e00001" and "unknown robot" in letter.reason
 
 

@@ -19,9 +19,12 @@ every message counts (diagnostics, goals, delivery status) are delivered as they
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 log = logging.getLogger(__name__)
@@ -37,13 +40,15 @@ LOCALHOST_CONFIG = (
 )
 
 
-def domain_settings(env: Mapping[str, str]) -> tuple[int, str | None]:
-    """(domain id, Cyclone configuration) from ROS 2's environment variables."""
-    domain = int(env.get("ROS_DOMAIN_ID") or 0)
+def domain_settings(env: Mapping[str, str]) -> tuple[int, bool]:
+    """(domain id, localhost only) from ROS 2's environment variables."""
+    raw = (env.get("ROS_DOMAIN_ID") or "0").strip()
+    if not raw.isascii() or not raw.isdigit() or int(raw) > 232:
+        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: must be a whole number from 0 to 232")
     localhost = env.get("ROS_LOCALHOST_ONLY") == "1" or (
         env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST"
     )
-    return domain, LOCALHOST_CONFIG if localhost else None
+    return int(raw), localhost
 
 
 def dds_topic_name(ros_topic: str) -> str:
@@ -56,7 +61,11 @@ class DdsReaders:
     Cyclone's listener thread."""
 
     def __init__(
-        self, topics: dict[str, str], on_message: Callable[[str, Any], None], env: Mapping[str, str]
+        self,
+        topics: Mapping[str, str],
+        on_message: Callable[[str, Any], None],
+        domain_id: int,
+        localhost_only: bool,
     ) -> None:
         try:
             from cyclonedds.core import Listener, Policy, Qos
@@ -64,16 +73,13 @@ class DdsReaders:
             from cyclonedds.sub import DataReader
             from cyclonedds.topic import Topic
 
-            from phytrace_edge.ingest.dds_types import DDS_TYPES
+            from phytrace_edge.ingest.sources.dds_types import DDS_TYPES
         except ImportError:
-            from phytrace_edge.errors import ConfigError
-
             raise ConfigError(
                 "BRIDGE_INPUT=dds: needs cyclonedds (pip install 'phytrace-edge[dds]')"
             ) from None
-        domain_id, config = domain_settings(env)
         # the Domain object carries the configuration: it must live as long as the readers
-        self._domain = Domain(domain_id, config) if config else None
+        self._domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost_only else None
         self.participant: Any = DomainParticipant(domain_id)
         self._on_message = on_message
         self.readers: list[Any] = []
@@ -104,7 +110,7 @@ class DdsReaders:
         log.info(
             "DDS: domain %d%s, %d readers",
             domain_id,
-            " (localhost only)" if config else "",
+            " (localhost only)" if localhost_only else "",
             len(self.readers),
         )
 
@@ -117,3 +123,42 @@ class DdsReaders:
     def close(self) -> None:
         self.readers.clear()
         self.participant = None
+
+
+class DdsSource:
+    """Readers on the robot's DDS domain; Cyclone's threads deliver every-message
+    topics, and the sampler takes the state topics at each tick."""
+
+    keeps_time = False
+    clock = None
+
+    def __init__(self, options: SourceOptions) -> None:
+        self._options = options
+        self._readers: DdsReaders | None = None
+
+    def start(self, feed: Feed) -> None:
+        self._readers = DdsReaders(
+            self._options.topics,
+            feed.on_message,
+            self._options.dds_domain_id,
+            self._options.dds_localhost_only,
+        )
+
+    def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
+        """Cyclone's own threads read the network: only stay alive and say so."""
+        while not stop.wait(1.0):
+            beat()
+
+    def before_tick(self) -> None:
+        if self._readers is not None:
+            self._readers.take_latest()
+
+    def stop(self) -> None:
+        if self._readers is not None:
+            self._readers.close()
+
+    def finished(self) -> Finished | None:
+        return None
+
+    def topic_stats(self) -> dict[str, dict[str, Any]]:
+        return {}

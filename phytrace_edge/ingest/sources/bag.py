@@ -14,12 +14,13 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 log = logging.getLogger(__name__)
@@ -79,16 +80,15 @@ def open_reader(path: str) -> Any:
 
 def replay(
     path: str,
-    topics: dict[str, str],
-    on_message: Callable[[str, Any], None],
-    tick: Callable[[float], None],
+    topics: Mapping[str, str],
+    feed: Feed,
     clock: BagClock,
-    sample_rate_hz: float,
     rate: float,
     stop: threading.Event,
+    beat: Callable[[], None] = lambda: None,
 ) -> ReplaySummary:
-    """Feed the bag's messages to ``on_message`` and call ``tick(bag_time_s)`` every
-    1/``sample_rate_hz`` of bag time; stops at the end of the bag, at ``stop``, or at
+    """Feed the bag's messages to ``feed.on_message`` and call ``feed.tick(bag_time_s)``
+    every sample period of bag time; stops at the end of the bag, at ``stop``, or at
     the first unreadable record (reported in the summary, never raised)."""
     summary = ReplaySummary(path)
     reader = open_reader(path)
@@ -100,7 +100,7 @@ def replay(
             wanted.append(connection)
         else:
             summary.skipped[f"{connection.topic} ({connection.msgtype})"] += connection.msgcount
-    period_ns = int(NS / sample_rate_hz)
+    period_ns = int(feed.sample_period_s * NS)
     started = time.monotonic()
     first_ns: int | None = None
     next_tick_ns = 0
@@ -109,7 +109,7 @@ def replay(
         nonlocal next_tick_ns
         while next_tick_ns <= limit_ns:
             clock.now_s = next_tick_ns / NS
-            tick(clock.now_s)
+            feed.tick(clock.now_s)
             summary.events += 1
             next_tick_ns += period_ns
 
@@ -128,7 +128,8 @@ def replay(
                 clock.now_s = timestamp / NS
                 name = canonical[connection.topic]
                 summary.messages[name] += 1
-                on_message(name, reader.deserialize(raw, connection.msgtype))
+                feed.on_message(name, reader.deserialize(raw, connection.msgtype))
+                beat()
             if first_ns is not None and not stop.is_set():
                 ticks_until(int(clock.now_s * NS))
         finally:
@@ -142,3 +143,48 @@ def replay(
             summary.error,
         )
     return summary
+
+
+class BagSource:
+    """A recorded bag through the handlers, on the bag's timeline; finite."""
+
+    keeps_time = True
+
+    def __init__(self, options: SourceOptions) -> None:
+        self._options = options
+        open_reader(options.bag_path).close()  # a missing or unreadable bag fails at start
+        self.clock = BagClock()
+        self._feed: Feed | None = None
+        self._summary: ReplaySummary | None = None
+
+    def start(self, feed: Feed) -> None:
+        self._feed = feed
+
+    def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
+        """Replay the bag once; returns at its end (or at ``stop``)."""
+        assert self._feed is not None, "start() first"
+        options = self._options
+        self._summary = replay(
+            options.bag_path,
+            options.topics,
+            self._feed,
+            self.clock,
+            options.replay_rate,
+            stop,
+            beat,
+        )
+        log.info("%s", self._summary.describe())
+
+    def before_tick(self) -> None:
+        """The replay feeds every message itself: nothing to take at the tick."""
+
+    def stop(self) -> None:
+        """The reader is closed by the replay itself."""
+
+    def finished(self) -> Finished | None:
+        if self._summary is None:
+            return None
+        return Finished(self._summary.describe(), ok=self._summary.error is None)
+
+    def topic_stats(self) -> dict[str, dict[str, Any]]:
+        return {}

@@ -10,11 +10,11 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
 from typing import Any, Protocol
 
-from phytrace_edge.build.accumulate import DiagnosticsTracker, GoalTracker, TransitionTracker
-from phytrace_edge.build.assemble import Latest, Snapshot, assemble_event, is_fresh
+from phytrace_edge.builder.accumulate import DiagnosticsTracker, GoalTracker, TransitionTracker
+from phytrace_edge.builder.assemble import Latest, Snapshot, assemble_event, is_fresh
+from phytrace_edge.builder.options import BuilderOptions
 from phytrace_edge.udm.event import new_event_id
 
 
@@ -36,33 +36,13 @@ class SystemClock:
         return time.time()
 
 
-@dataclass(frozen=True)
-class Identity:
-    """Who the events are about (the UDM ``identity`` object)."""
-
-    source_id: str
-    source_type: str
-    fleet_id: str | None = None
-    site_id: str | None = None
-
-    def as_dict(self) -> dict[str, str]:
-        return {key: value for key, value in vars(self).items() if value is not None}
-
-
 class UDMBuilder:
     """Latest values in, one UDM event per ``build_event`` call out."""
 
-    def __init__(
-        self,
-        identity: Identity,
-        *,
-        stale_after_s: float,
-        use_sim_time: bool = False,
-        clock: Clock | None = None,
-    ) -> None:
-        self._identity = identity.as_dict()
-        self._stale_after_s = stale_after_s
-        self._use_sim_time = use_sim_time
+    def __init__(self, options: BuilderOptions, clock: Clock | None = None) -> None:
+        self._identity = options.identity.as_dict()
+        self._stale_after_s = options.stale_after_s
+        self._use_sim_time = options.use_sim_time
         self._clock = clock or SystemClock()
         self._lock = threading.Lock()
         self._latest: dict[str, Latest] = {}

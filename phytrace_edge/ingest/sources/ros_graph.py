@@ -1,26 +1,27 @@
-"""The rclpy side of ingest: subscriptions that feed the dispatcher, and the sample timer.
+"""Subscriptions on a ROS 2 graph, matched to what the publishers offer.
 
 Everything rclpy-specific goes through ``RosApi``, so this code runs unchanged on real
-rclpy (``load_rclpy()``, imported lazily: rclpy is not on PyPI and the core must work
-without it) and on the mock layer the simulator and the tests use.
+rclpy (``sources/ros.py``, the one module that imports it) and on the mock layer the
+simulator and the tests use (``sources/sim.py``).
 """
 
 from __future__ import annotations
 
-import importlib
 import logging
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.qos import QosChoice, matching_qos
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 log = logging.getLogger(__name__)
 
 SAMPLED_QUEUE_DEPTH = 5
 EVERY_MESSAGE_QUEUE_DEPTH = 100
+GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
+OnMessage = Callable[[str, Any], None]
 
 
 @dataclass(frozen=True)
@@ -32,33 +33,6 @@ class RosApi:
     qos: Any  # the rclpy.qos module: QoSProfile and the policy enums
     clock: Callable[[str], Any]  # "steady" or "system" -> an rclpy Clock
     subscription_events: Callable[[Callable[[Any], None]], Any]  # incompatible-QoS callback
-
-
-def load_rclpy() -> RosApi:
-    """The real rclpy; raises ImportError when ROS 2 is not sourced."""
-    rclpy = importlib.import_module("rclpy")
-    qos = importlib.import_module("rclpy.qos")
-    clock = importlib.import_module("rclpy.clock")
-
-    def message_type(type_name: str) -> type:
-        package, _, name = type_name.split("/")
-        return getattr(importlib.import_module(f"{package}.msg"), name)
-
-    def make_clock(kind: str) -> Any:
-        clock_type = (
-            clock.ClockType.STEADY_TIME if kind == "steady" else clock.ClockType.SYSTEM_TIME
-        )
-        return clock.Clock(clock_type=clock_type)
-
-    try:  # Iron and later
-        events = importlib.import_module("rclpy.event_handler")
-    except ImportError:  # Humble
-        events = importlib.import_module("rclpy.qos_event")
-
-    def subscription_events(on_incompatible: Callable[[Any], None]) -> Any:
-        return events.SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
-
-    return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events)
 
 
 class NodeClock:
@@ -75,30 +49,6 @@ class NodeClock:
         return float(self._system.now().nanoseconds) / 1e9
 
 
-@dataclass(frozen=True)
-class QosChoice:
-    """What a subscription asks for: the part of QoS that decides matching."""
-
-    reliable: bool
-    transient_local: bool
-
-    def describe(self) -> str:
-        return (
-            f"{'reliable' if self.reliable else 'best effort'}, "
-            f"{'transient local' if self.transient_local else 'volatile'}"
-        )
-
-
-def matching_qos(offered: list[tuple[bool, bool]]) -> QosChoice:
-    """The QoS that receives from every publisher (the rule rosbag2 and foxglove_bridge
-    use): reliable only when every publisher is reliable, transient local only when
-    every publisher is. ``offered`` holds (reliable, transient_local) per publisher."""
-    return QosChoice(
-        reliable=bool(offered) and all(reliable for reliable, _ in offered),
-        transient_local=bool(offered) and all(latched for _, latched in offered),
-    )
-
-
 class TopicSubscriber:
     """One subscription per enabled topic, matched to what its publishers offer.
 
@@ -113,13 +63,14 @@ class TopicSubscriber:
         api: RosApi,
         node: Any,
         topics: dict[str, str],
-        dispatcher: Dispatcher,
+        on_message: OnMessage,
         overrides: dict[str, QosChoice] | None = None,
     ) -> None:
         self._api, self._node, self._topics = api, node, topics
-        self._dispatcher = dispatcher
+        self._on_message = on_message
         self._overrides = overrides or {}
         self.subscribed: dict[str, tuple[Any, QosChoice, str]] = {}
+        self.publishers: dict[str, int] = dict.fromkeys(topics, 0)
         self.qos_incompatible: Counter[str] = Counter()
 
     def refresh(self) -> None:
@@ -130,6 +81,7 @@ class TopicSubscriber:
                 for info in self._node.get_publishers_info_by_topic(actual)
                 if info.topic_type in spec.type_names
             ]
+            self.publishers[canonical] = len(publishers)
             if not publishers:
                 continue
             choice = self._overrides.get(canonical) or matching_qos(
@@ -157,6 +109,20 @@ class TopicSubscriber:
                 "%s: subscribed to %s (%s) as %s", canonical, actual, type_name, choice.describe()
             )
 
+    def stats(self) -> dict[str, dict[str, Any]]:
+        """Per configured topic: publishers seen, the QoS subscribed with, and how many
+        publishers' QoS could not be matched."""
+        return {
+            canonical: {
+                "publishers": self.publishers.get(canonical, 0),
+                "qos": self.subscribed[canonical][1].describe()
+                if canonical in self.subscribed
+                else None,
+                "qos_incompatible": self.qos_incompatible.get(canonical, 0),
+            }
+            for canonical in self._topics
+        }
+
     def _subscribe(self, canonical: str, actual: str, type_name: str, choice: QosChoice) -> Any:
         qos = self._api.qos
         depth = (
@@ -175,7 +141,7 @@ class TopicSubscriber:
         )
 
         def on_message(msg: Any) -> None:
-            self._dispatcher.on_message(canonical, msg)
+            self._on_message(canonical, msg)
 
         def on_incompatible(event: Any) -> None:
             self.qos_incompatible[canonical] += 1
@@ -194,7 +160,16 @@ class TopicSubscriber:
         )
 
 
-def create_sample_timer(api: RosApi, node: Any, rate_hz: float, on_tick: Callable[[], None]) -> Any:
-    """The builder's tick, on the steady clock: wall-clock jumps and sim time never
-    stretch or squeeze the sample rate."""
-    return node.create_timer(1.0 / rate_hz, on_tick, clock=api.clock("steady"))
+def subscribe_topics(
+    api: RosApi,
+    node: Any,
+    topics: dict[str, str],
+    on_message: OnMessage,
+    overrides: dict[str, QosChoice] | None = None,
+) -> TopicSubscriber:
+    """Subscribe ``node`` to the topics that have publishers now, and look again every
+    GRAPH_CHECK_S for topics that appear later or publishers that need another QoS."""
+    subscriber = TopicSubscriber(api, node, topics, on_message, overrides)
+    subscriber.refresh()
+    node.create_timer(GRAPH_CHECK_S, subscriber.refresh, clock=api.clock("steady"))
+    return subscriber

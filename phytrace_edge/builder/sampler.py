@@ -1,0 +1,62 @@
+"""The sample tick: the one loop that turns the builder's latest values into events.
+
+Every input uses it. Live inputs (rclpy, Cyclone DDS, the real-time simulator) let
+``Sampler.run`` keep the rate on the monotonic clock, in a thread of its own, so wall
+clock jumps and sim time never stretch or squeeze it. Inputs that keep their own time
+(a bag replayed on its timeline, the simulator in virtual time) call ``tick`` themselves.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from phytrace_edge.builder.builder import UDMBuilder
+
+Event = dict[str, Any]
+
+
+class Sampler:
+    """Builds one event per tick and hands it to ``emit``.
+
+    ``before_tick`` runs first on every tick: an input that reads its state topics at
+    the tick (instead of on every message) takes their newest samples there.
+    """
+
+    def __init__(
+        self,
+        builder: UDMBuilder,
+        emit: Callable[[Event], None],
+        rate_hz: float,
+        before_tick: Callable[[], None] | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.builder = builder
+        self.period_s = 1.0 / rate_hz
+        self._emit = emit
+        self._before_tick = before_tick
+        self._monotonic = monotonic
+        self.ticks = 0
+
+    def tick(self, captured_at_s: float | None = None) -> None:
+        """Build and emit the event of this tick; ``captured_at_s`` overrides the wall
+        clock (a replay's timeline)."""
+        if self._before_tick is not None:
+            self._before_tick()
+        self.ticks += 1
+        self._emit(self.builder.build_event(captured_at_s))
+
+    def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:
+        """Tick every period until ``stop``. Ticks are scheduled on the monotonic clock
+        without drift; periods missed while the process was stalled are skipped, as
+        rcl's timers do, rather than fired in a burst."""
+        next_at = self._monotonic() + self.period_s
+        while not stop.wait(max(0.0, next_at - self._monotonic())):
+            self.tick()
+            beat()
+            next_at += self.period_s
+            now = self._monotonic()
+            if next_at <= now:
+                next_at = now + self.period_s

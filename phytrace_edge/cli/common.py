@@ -1,0 +1,62 @@
+"""What the commands share: the setting flags, value display, errors, JSON output."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from phytrace_edge.config import setting_infos
+from phytrace_edge.redact import Secret
+from phytrace_edge.units import format_bytes
+
+SETTING_PREFIX = "setting_"
+# flags that keep another name working: DESIGN.md and the docs say --input
+FLAG_ALIASES = {"bridge_input": ("--input",)}
+
+
+def add_setting_flags(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("settings (each also an environment variable)")
+    group.add_argument("--config", metavar="PATH", help="TOML config file (or PHYTRACE_CONFIG)")
+    for info in setting_infos():
+        group.add_argument(
+            *FLAG_ALIASES.get(info.key, ()),
+            info.flag,
+            dest=SETTING_PREFIX + info.key,
+            metavar="VALUE",
+            help=f"{info.doc} [{info.env}]",
+        )
+
+
+def setting_flags(args: argparse.Namespace) -> dict[str, Any]:
+    """The settings given as flags, by key (None: not given)."""
+    return {
+        key[len(SETTING_PREFIX) :]: value
+        for key, value in vars(args).items()
+        if key.startswith(SETTING_PREFIX)
+    }
+
+
+def shown_value(key: str, value: Any) -> str:
+    """A setting's value as ``config`` prints it (the API key redacted)."""
+    if isinstance(value, Secret):
+        return str(value) or "(empty)"
+    if value is None:
+        return "(none)"
+    if key.endswith("_bytes") and isinstance(value, int):
+        return f"{value} ({format_bytes(value)})"
+    if isinstance(value, (dict, frozenset)):
+        items = value.items() if isinstance(value, dict) else ((v, None) for v in sorted(value))
+        return ",".join(k if v is None else f"{k}={v}" for k, v in items) or "(none)"
+    return str(value)
+
+
+def error(message: str) -> None:
+    """One line on stderr."""
+    print(f"phytrace-edge: error: {message}", file=sys.stderr)
+
+
+def print_json(document: Any) -> None:
+    import orjson
+
+    sys.stdout.write(orjson.dumps(document, option=orjson.OPT_INDENT_2).decode() + "\n")

@@ -1,0 +1,57 @@
+"""``phytrace-edge dead-letters``: events PhyCloud refused for good."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from phytrace_edge.config import LoadedSettings
+from phytrace_edge.errors import EXIT_OK, ConfigError
+from phytrace_edge.runtime import wiring
+
+
+def add_parser(commands: Any) -> argparse.ArgumentParser:
+    parser: argparse.ArgumentParser = commands.add_parser(
+        "dead-letters", help="list, export, requeue or purge events PhyCloud rejected"
+    )
+    parser.add_argument("action", choices=["list", "export", "requeue", "purge"])
+    parser.add_argument("ids", nargs="*", type=int, help="dead letter ids (default: all)")
+    parser.add_argument("--limit", type=int, default=100, help="list at most this many")
+    parser.add_argument("--output", "-o", default="-", help="export to this file (- = stdout)")
+    parser.add_argument("--older-than-days", type=float, help="purge only those older")
+    parser.add_argument("--all", action="store_true", help="purge all")
+    return parser
+
+
+def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Inspect, export, requeue or purge events PhyCloud rejected for good."""
+    from phytrace_edge.udm.event import format_timestamp
+
+    ids = args.ids or None
+    if args.action == "purge" and ids is None and args.older_than_days is None and not args.all:
+        raise ConfigError("purge needs ids, --older-than-days or --all")
+    with wiring.open_queue(loaded.settings) as store:
+        box = store.dead_letters
+        if args.action == "list":
+            letters = box.list(limit=args.limit)
+            print(f"{box.count()} dead letter(s) in {store.path}")
+            for letter in letters:
+                print(
+                    f"{letter.id:>6}  {format_timestamp(letter.dead_at)}  {letter.event_id}  "
+                    f"{letter.reason}  {(letter.response or '')[:60]}"
+                )
+        elif args.action == "export":
+            if args.output == "-":
+                written = box.export(sys.stdout.buffer)
+            else:
+                with open(args.output, "wb") as out:  # noqa: PTH123 - a binary stream
+                    written = box.export(out)
+            print(f"exported {written} dead letter(s)", file=sys.stderr)
+        elif args.action == "requeue":
+            print(f"requeued {box.requeue(ids)} dead letter(s) at the end of the queue")
+        else:
+            days = args.older_than_days
+            before = None if days is None else store.now() - days * 86400
+            print(f"purged {box.purge(ids, before=before)} dead letter(s)")
+    return EXIT_OK

@@ -1,0 +1,54 @@
+"""``phytrace-edge drain``: send the whole backlog now, with a progress bar."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from typing import Any
+
+from phytrace_edge.config import LoadedSettings
+from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
+from phytrace_edge.runtime import wiring
+from phytrace_edge.units import format_bytes
+
+
+def add_parser(commands: Any) -> argparse.ArgumentParser:
+    parser: argparse.ArgumentParser = commands.add_parser(
+        "drain", help="send the whole backlog now, with a progress bar"
+    )
+    parser.add_argument("--timeout", type=float, help="give up after this many seconds")
+    return parser
+
+
+def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Send the whole backlog now; exit 0 only when the queue is empty at the end."""
+    from tqdm import tqdm
+
+    from phytrace_edge.ship.sender import Sender
+
+    settings = loaded.settings
+    started = time.monotonic()
+    with wiring.open_queue(settings) as store:
+        sender = Sender(store, wiring.http_transport(settings), wiring.send_policy(settings))
+        signal.signal(signal.SIGINT, lambda signum, frame: sender.stop.set())
+        signal.signal(signal.SIGTERM, lambda signum, frame: sender.stop.set())
+        depth = store.counter("depth")
+        with tqdm(total=depth, unit="ev", desc="draining", file=sys.stderr, disable=None) as bar:
+
+            def progress(sent: int) -> None:
+                bar.update(sent)
+                bar.set_postfix(left=format_bytes(store.counter("stored_bytes")))
+
+            deadline = None if args.timeout is None else started + args.timeout
+            empty = sender.drain(deadline=deadline, progress=progress)
+        left = store.counter("depth")
+        sender.transport.close()
+    elapsed = time.monotonic() - started
+    if empty:
+        print(f"drained {sender.stats.events_sent} event(s) in {elapsed:.1f} s; the queue is empty")
+        return EXIT_OK
+    why = sender.stats.last_error or ("timeout" if args.timeout else "stopped")
+    print(f"sent {sender.stats.events_sent} event(s) in {elapsed:.1f} s; {left} left ({why})")
+    return EXIT_UNHEALTHY

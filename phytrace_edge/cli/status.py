@@ -1,0 +1,85 @@
+"""``phytrace-edge status``: the queue and the service, for people or as JSON; exit 0
+healthy, 1 unhealthy, 3 not running."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+from phytrace_edge.cli.common import error, print_json
+from phytrace_edge.config import LoadedSettings
+from phytrace_edge.errors import EXIT_NOT_RUNNING
+from phytrace_edge.runtime import wiring
+from phytrace_edge.units import format_bytes
+
+
+def add_parser(commands: Any) -> argparse.ArgumentParser:
+    parser: argparse.ArgumentParser = commands.add_parser(
+        "status", help="show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running"
+    )
+    parser.add_argument("--json", action="store_true", help="print JSON (a stable interface)")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print nothing: exit code only")
+    return parser
+
+
+def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running."""
+    from phytrace_edge.queue.inspect import read_stats
+    from phytrace_edge.runtime.health import exit_code, report
+
+    path = wiring.queue_path(loaded.settings)
+    now = time.time()
+    stats = read_stats(path, now)
+    if stats is None:
+        error(f"no queue at {path}: the bridge never ran with this QUEUE_PATH")
+        return EXIT_NOT_RUNNING
+    document = report(stats, wiring.health_thresholds(loaded.settings), now)
+    if args.json:
+        print_json(document)
+    elif not args.quiet:
+        print(render_status(document))
+    return exit_code(document)
+
+
+def render_status(d: dict[str, Any]) -> str:
+    """The status document as a table for people."""
+    state = "HEALTHY" if d["healthy"] else ("UNHEALTHY" if d["problems"] else "NOT RUNNING")
+    service, queue = d["service"], d["queue"]
+    lines = [f"phytrace-edge status: {state}"]
+    if d["heartbeat_age_s"] is None:
+        lines.append("  service      never ran with this queue")
+    else:
+        verb = "running" if d["running"] else "not running"
+        lines.append(
+            f"  service      {verb} (pid {service.get('pid')}, {service.get('version')}, input "
+            f"{service.get('input')}, {service.get('source_id')} -> "
+            f"{service.get('endpoint_host')}), heartbeat {d['heartbeat_age_s']:.1f} s ago"
+        )
+    oldest = "" if queue["oldest_age_s"] is None else f", oldest {queue['oldest_age_s']:.1f} s"
+    lines.append(
+        f"  queue        {queue['depth']} event(s), {format_bytes(queue['bytes'])} of "
+        f"{format_bytes(queue['cap_bytes'])} ({queue['fill']:.0%}){oldest}  {queue['path']}"
+    )
+    lines.append(
+        f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
+        f"success {d['last_success_at'] or 'never'}"
+    )
+    if d["last_error"]:
+        lines.append(f"  last error   {d['last_error']} at {d['last_error_at']}")
+    drops = ", ".join(f"{reason} {n}" for reason, n in d["drops"].items()) or "none"
+    lines.append(f"  drops        {drops}")
+    lines.append(
+        f"  dead letters {d['dead_letters']}"
+        + ("  (phytrace-edge dead-letters list)" if d["dead_letters"] else "")
+    )
+    for topic, t in d["topics"].items():
+        age = t.get("last_seen_age_s")
+        seen = "" if age is None else f", last {age:.1f} s ago"
+        rejected = sum(t.get("rejected", {}).values())
+        lines.append(
+            f"  {topic:<16} {t['rate_hz']:.1f} Hz, {t['received']} received{seen}"
+            + (f", {rejected} rejected" if rejected else "")
+        )
+    lines += [f"  problem: {problem}" for problem in d["problems"]]
+    return "\n".join(lines)

@@ -1,0 +1,143 @@
+"""Loading the settings from their sources, highest first: command-line flag,
+environment variable, config file (TOML), ROS parameter, default.
+
+``load_settings`` is a pure function from those sources to a frozen ``Settings``; the
+CLI calls ``settings_from_environment`` at its edge, and only the runtime's wiring
+reads the result. An empty environment variable counts as unset, because compose
+files pass ``${FLEET_ID}`` through as an empty string when the operator did not set it.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from phytrace_edge.config.settings import SettingInfo, Settings, setting_infos
+from phytrace_edge.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class LoadedSettings:
+    """Settings plus where each value came from (``default``, ``env:NAME``, ...)."""
+
+    settings: Settings
+    origins: dict[str, str]
+
+
+def _shown(info: SettingInfo, raw: Any) -> str:
+    return "'***'" if info.key == "phycloud_api_key" else repr(raw)
+
+
+def load_settings(
+    flags: Mapping[str, Any] | None = None,
+    env: Mapping[str, str] | None = None,
+    config_file: Mapping[str, Any] | None = None,
+    ros_params: Mapping[str, Any] | None = None,
+    file_label: str = "file",
+) -> LoadedSettings:
+    """Resolve every setting from its sources (flags > env > file > ROS param > default).
+
+    ``flags``, ``config_file`` and ``ros_params`` are keyed by the lower-case name; a
+    flag whose value is None was not given. Raises ``ConfigError`` naming the setting,
+    the value and what is allowed.
+    """
+    flags, env = flags or {}, env or {}
+    config_file, ros_params = config_file or {}, ros_params or {}
+    known = {info.key for info in setting_infos()}
+    for key in config_file:
+        if key not in known:
+            raise ConfigError(f"{file_label}: unknown setting {key!r}")
+
+    values: dict[str, Any] = {}
+    origins: dict[str, str] = {}
+    for info in setting_infos():
+        raw, origin, name = _pick(info, flags, env, config_file, ros_params, file_label)
+        if origin == "default":
+            values[info.key] = info.default
+        else:
+            try:
+                values[info.key] = info.parse(raw)
+            except ValueError as exc:
+                raise ConfigError(f"{name}={_shown(info, raw)}: must be {exc}") from None
+        origins[info.key] = origin
+
+    settings = Settings(**values)
+    if settings.retry_max_s < settings.retry_min_s:
+        raise ConfigError(
+            f"RETRY_MAX_S={settings.retry_max_s:g}: must be >= RETRY_MIN_S "
+            f"({settings.retry_min_s:g})"
+        )
+    if settings.queue_path is None:
+        settings = replace(settings, queue_path=str(default_state_dir(env) / "queue.db"))
+    return LoadedSettings(settings, origins)
+
+
+def _pick(
+    info: SettingInfo,
+    flags: Mapping[str, Any],
+    env: Mapping[str, str],
+    config_file: Mapping[str, Any],
+    ros_params: Mapping[str, Any],
+    file_label: str,
+) -> tuple[Any, str, str]:
+    """The raw value of one setting, its origin label and the name to blame in errors."""
+    if flags.get(info.key) is not None:
+        return flags[info.key], f"flag {info.flag}", info.flag
+    for name in (info.env, *info.aliases):
+        if env.get(name, "").strip():
+            return env[name], f"env {name}", name
+    if info.key in config_file:
+        return config_file[info.key], file_label, f"{file_label}: {info.key}"
+    if info.key in ros_params:
+        return ros_params[info.key], "ros param", f"ros param {info.key}"
+    return None, "default", info.env
+
+
+def read_config_file(path: str) -> dict[str, Any]:
+    """Parse a TOML config file into a flat {key: value} table."""
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover - exercised on 3.10 only
+        import tomli as tomllib
+    try:
+        with Path(path).open("rb") as handle:
+            return tomllib.load(handle)
+    except FileNotFoundError:
+        raise ConfigError(f"config file {path}: not found") from None
+    except OSError as exc:
+        raise ConfigError(f"config file {path}: cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"config file {path}: not valid TOML ({exc})") from None
+
+
+def default_state_dir(env: Mapping[str, str]) -> Path:
+    """Where the queue lives when QUEUE_PATH is not set.
+
+    systemd's ``StateDirectory=`` sets ``$STATE_DIRECTORY`` (a colon-separated list);
+    the container image sets ``PHYTRACE_STATE_DIR=/var/lib/phytrace-edge`` on its volume;
+    otherwise the per-user XDG state directory.
+    """
+    if env.get("STATE_DIRECTORY"):
+        return Path(env["STATE_DIRECTORY"].split(":")[0])
+    if env.get("PHYTRACE_STATE_DIR"):
+        return Path(env["PHYTRACE_STATE_DIR"])
+    base = env.get("XDG_STATE_HOME") or str(Path(env.get("HOME", "~")) / ".local" / "state")
+    return Path(base).expanduser() / "phytrace-edge"
+
+
+def settings_from_environment(
+    flags: Mapping[str, Any] | None = None,
+    env: Mapping[str, str] | None = None,
+    config_path: str | None = None,
+    ros_params: Mapping[str, Any] | None = None,
+) -> LoadedSettings:
+    """Load settings the way the CLI does: flags, ``os.environ``, the config file named
+    by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
+    env = dict(os.environ) if env is None else env
+    path = config_path or env.get("PHYTRACE_CONFIG") or None
+    file_values = read_config_file(path) if path else {}
+    return load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")

@@ -1,0 +1,190 @@
+"""The settings: each has one name, one default, one validation rule and one doc line.
+
+Naming: the environment variable is the upper-case name (``SAMPLE_RATE_HZ``), the TOML
+key and ROS parameter the lower-case name (``sample_rate_hz``) and the flag its dashed
+form (``--sample-rate-hz``). The reference guide's aliases (``ROBOT_ID``,
+``ROBOT_TYPE``) keep working; the primary name wins when both are set. Defaults of a
+stage's settings are the stage's own constants; the rest (logging, health, metrics,
+shutdown) are the runtime's and live here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any
+
+from phytrace_edge.builder.options import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
+from phytrace_edge.config.parsers import (
+    KNOWN_TOPICS,
+    boolean,
+    bridge_input,
+    byte_size,
+    existing_file,
+    http_url,
+    identifier,
+    int_between,
+    namespace,
+    non_negative_float,
+    one_of,
+    optional,
+    path_value,
+    positive_float,
+    secret,
+    topic_qos,
+    topic_remap,
+    topic_set,
+)
+from phytrace_edge.ingest.qos import QosChoice
+from phytrace_edge.ingest.sources.base import DEFAULT_REPLAY_RATE
+from phytrace_edge.queue import options as queue
+from phytrace_edge.redact import Secret
+from phytrace_edge.ship import options as ship
+from phytrace_edge.units import KIB, MIB
+
+SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
+DEFAULT_SHUTDOWN_GRACE_S = 5.0
+
+
+def setting(default: Any, parse: Callable[[Any], Any], doc: str, *aliases: str) -> Any:
+    """Declare one setting: its default, its parser/validator, its doc line, env aliases."""
+    return field(default=default, metadata={"parse": parse, "doc": doc, "aliases": aliases})
+
+
+@dataclass(frozen=True)
+class Settings:
+    """The effective configuration, validated once at start."""
+
+    phycloud_endpoint: str = setting(
+        ship.DEFAULT_ENDPOINT, http_url, "PhyCloud ingestion API base URL"
+    )
+    phycloud_api_key: Secret = setting(Secret(""), secret, "API key sent as a Bearer token")
+    source_id: str = setting("delivery-robot-001", identifier, "unique robot id", "ROBOT_ID")
+    source_type: str = setting("delivery_robot", one_of(*SOURCE_TYPES), "robot class", "ROBOT_TYPE")
+    fleet_id: str | None = setting(None, optional(identifier), "fleet grouping id")
+    site_id: str | None = setting(None, optional(identifier), "site or facility id")
+    sample_rate_hz: float = setting(
+        DEFAULT_SAMPLE_RATE_HZ, positive_float(1000), "UDM events built per second"
+    )
+    batch_size: int = setting(ship.DEFAULT_BATCH_SIZE, int_between(1, 10_000), "events per request")
+    bridge_input: str = setting("ros", bridge_input, "where messages come from")
+    use_sim_time: bool = setting(False, boolean, "header stamps follow /clock, not the epoch")
+    replay_rate: float = setting(
+        DEFAULT_REPLAY_RATE,
+        non_negative_float(1000),
+        "bag replay speed: 1 = recorded, 0 = as fast as possible",
+    )
+    queue_path: str | None = setting(None, optional(path_value), "queue database file")
+    queue_max_bytes: int = setting(
+        queue.DEFAULT_MAX_BYTES, byte_size(1 * MIB), "byte cap of the queue (WAL included)"
+    )
+    queue_max_events: int | None = setting(
+        None, optional(int_between(1, 10**12)), "optional event cap of the queue"
+    )
+    queue_on_full: str = setting(
+        queue.DEFAULT_ON_FULL, one_of(*queue.ON_FULL_POLICIES), "what a full queue drops"
+    )
+    queue_ttl_s: float = setting(
+        queue.DEFAULT_TTL_S, positive_float(10 * 365 * 86400), "queued events expire after"
+    )
+    queue_compression: str = setting(
+        queue.DEFAULT_COMPRESSION,
+        one_of(*queue.COMPRESSIONS),
+        "compression of queued events at rest",
+    )
+    queue_sync: str = setting(
+        queue.DEFAULT_SYNC, one_of(*queue.SYNC_MODES), "fsync policy of the queue"
+    )
+    http_compression: str = setting(
+        ship.DEFAULT_HTTP_COMPRESSION,
+        one_of(*ship.HTTP_COMPRESSIONS),
+        "Content-Encoding of requests",
+    )
+    batch_max_bytes: int = setting(
+        ship.DEFAULT_BATCH_MAX_BYTES, byte_size(1 * KIB), "byte bound of one request body"
+    )
+    flush_interval_s: float = setting(
+        ship.DEFAULT_FLUSH_INTERVAL_S, positive_float(3600), "send a partial batch after"
+    )
+    retry_min_s: float = setting(ship.DEFAULT_RETRY_MIN_S, positive_float(3600), "first backoff")
+    retry_max_s: float = setting(ship.DEFAULT_RETRY_MAX_S, positive_float(86400), "longest backoff")
+    http_timeout_s: float = setting(ship.DEFAULT_HTTP_TIMEOUT_S, positive_float(600), "per request")
+    shutdown_grace_s: float = setting(
+        DEFAULT_SHUTDOWN_GRACE_S, positive_float(600), "time to flush at SIGTERM"
+    )
+    ca_bundle: str | None = setting(None, optional(existing_file), "extra CA file for TLS")
+    upload_max_bps: int | None = setting(
+        None, optional(int_between(1, 10**12)), "upload bandwidth cap, bytes/s"
+    )
+    stale_after_s: float = setting(
+        DEFAULT_STALE_AFTER_S, positive_float(86400), "drop a domain whose data is older"
+    )
+    topic_remap: dict[str, str] = setting(
+        None, optional(topic_remap), "topic renames, /odom=/wheel/odom,..."
+    )
+    topics_disabled: frozenset[str] = setting(
+        frozenset(), topic_set, "topics not subscribed, /scan,..."
+    )
+    topic_namespace: str | None = setting(
+        None, optional(namespace), "prefix of the topic names, e.g. /robot1"
+    )
+    topic_qos: dict[str, QosChoice] = setting(
+        None, optional(topic_qos), "per-topic QoS instead of matching, /scan=best_effort,..."
+    )
+    metrics_port: int = setting(0, int_between(0, 65535), "Prometheus endpoint port, 0 = off")
+    metrics_host: str = setting("127.0.0.1", identifier, "address the metrics endpoint binds")
+    health_stale_s: float = setting(
+        15.0, positive_float(3600), "status: heartbeat older than this means hung or dead"
+    )
+    health_no_progress_s: float = setting(
+        300.0, positive_float(86400), "status: events waiting, nothing sent for this long"
+    )
+    queue_warn_fraction: float = setting(
+        0.8, positive_float(1.0), "status: unhealthy above this fraction of the byte cap"
+    )
+    log_level: str = setting(
+        "INFO",
+        lambda raw: one_of("debug", "info", "warning", "error")(raw).upper(),
+        "log threshold",
+    )
+    log_format: str = setting("text", one_of("text", "json"), "log line format")
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Enabled topics: canonical name -> name subscribed on the robot (a remap wins
+        over the namespace)."""
+        remap = self.topic_remap or {}
+        prefix = self.topic_namespace or ""
+        return {t: remap.get(t, prefix + t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
+
+
+@dataclass(frozen=True)
+class SettingInfo:
+    """What the docs and ``phytrace-edge config`` say about one setting."""
+
+    key: str
+    env: str
+    aliases: tuple[str, ...]
+    flag: str
+    default: Any
+    doc: str
+    parse: Callable[[Any], Any]
+
+
+def setting_infos() -> list[SettingInfo]:
+    """Every setting, in declaration order."""
+    infos = []
+    for f in fields(Settings):
+        default = f.default if f.default is not MISSING else None
+        infos.append(
+            SettingInfo(
+                key=f.name,
+                env=f.name.upper(),
+                aliases=f.metadata["aliases"],
+                flag="--" + f.name.replace("_", "-"),
+                default=default,
+                doc=f.metadata["doc"],
+                parse=f.metadata["parse"],
+            )
+        )
+    return infos

@@ -1,0 +1,83 @@
+"""What every input has in common: its options, where it delivers, and its protocol.
+
+A source turns the outside world into ``(topic, message)`` calls of ``Feed.on_message``;
+it never builds events itself. The one tick loop (``builder.sampler``) builds them: in
+a thread of its own for live inputs, or called through ``Feed.tick`` by an input that
+keeps its own time (a bag on its timeline, the simulator in virtual time).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from phytrace_edge.ingest.qos import QosChoice
+
+DEFAULT_REPLAY_RATE = 1.0
+NODE_NAME = "phytrace_edge"
+
+
+@dataclass(frozen=True)
+class SourceOptions:
+    """BRIDGE_INPUT and the ingest settings, as plain values."""
+
+    kind: str  # "sim", "ros", "dds" or "bag"
+    topics: Mapping[str, str]  # canonical topic -> name subscribed on the robot
+    qos_overrides: Mapping[str, QosChoice] = field(default_factory=dict)
+    bag_path: str = ""
+    replay_rate: float = DEFAULT_REPLAY_RATE
+    ros_args: tuple[str, ...] = ()  # after --ros-args: remaps, log levels, parameters
+    dds_domain_id: int = 0
+    dds_localhost_only: bool = False
+    seed: int = 0  # of the simulated world
+    virtual_time: bool = False  # the simulator only: run as fast as possible
+    max_ticks: int | None = None  # the simulator only: stop after this many robot cycles
+
+
+@dataclass(frozen=True)
+class Feed:
+    """Where a source delivers: each message, and (for sources that keep their own
+    time) each sample tick with its ``captured_at`` (None = the wall clock)."""
+
+    on_message: Callable[[str, Any], None]
+    tick: Callable[[float | None], None]
+    sample_period_s: float
+
+
+class SourceClock(Protocol):
+    """The builder's clock, when a source keeps its own time."""
+
+    def monotonic(self) -> float: ...
+
+    def wall(self) -> float: ...
+
+
+@dataclass(frozen=True)
+class Finished:
+    """What a finite source (a bag) did, in one line, and whether it read to the end."""
+
+    text: str
+    ok: bool
+
+
+class Source(Protocol):
+    """One input. ``start`` opens it (a clear ConfigError when it cannot be), ``run``
+    is its loop (supervised: restarted when it raises; returning means a finite input
+    is exhausted), ``stop`` releases it."""
+
+    keeps_time: bool
+    clock: SourceClock | None
+
+    def start(self, feed: Feed) -> None: ...
+
+    def run(self, stop: threading.Event, beat: Callable[[], None]) -> None: ...
+
+    def before_tick(self) -> None: ...
+
+    def stop(self) -> None: ...
+
+    def finished(self) -> Finished | None: ...
+
+    def topic_stats(self) -> dict[str, dict[str, Any]]: ...

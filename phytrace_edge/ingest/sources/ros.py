@@ -1,0 +1,97 @@
+"""``BRIDGE_INPUT=ros``: the robot's ROS 2 graph through rclpy, the one module that
+imports it (lazily: rclpy comes with ROS 2, not from PyPI, and the core runs without)."""
+
+from __future__ import annotations
+
+import importlib
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
+from phytrace_edge.ingest.sources.ros_graph import RosApi, TopicSubscriber, subscribe_topics
+
+SPIN_TIMEOUT_S = 0.1
+
+
+def load_rclpy() -> RosApi:
+    """The real rclpy as a ``RosApi``; raises ImportError when ROS 2 is not sourced."""
+    rclpy = importlib.import_module("rclpy")
+    qos = importlib.import_module("rclpy.qos")
+    clock = importlib.import_module("rclpy.clock")
+
+    def message_type(type_name: str) -> type:
+        package, _, name = type_name.split("/")
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+
+    def make_clock(kind: str) -> Any:
+        clock_type = (
+            clock.ClockType.STEADY_TIME if kind == "steady" else clock.ClockType.SYSTEM_TIME
+        )
+        return clock.Clock(clock_type=clock_type)
+
+    try:  # Iron and later
+        events = importlib.import_module("rclpy.event_handler")
+    except ImportError:  # Humble
+        events = importlib.import_module("rclpy.qos_event")
+
+    def subscription_events(on_incompatible: Callable[[Any], None]) -> Any:
+        return events.SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
+
+    return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events)
+
+
+class RosSource:
+    """Subscriptions to the robot's topics on an rclpy node, spun on the ingest thread."""
+
+    keeps_time = False
+    clock = None
+
+    def __init__(self, options: SourceOptions) -> None:
+        self._options = options
+        try:
+            self._api = load_rclpy()
+            self._rclpy = importlib.import_module("rclpy")
+            self._executors = importlib.import_module("rclpy.executors")
+        except ImportError:
+            raise ConfigError(
+                "BRIDGE_INPUT='ros': rclpy is not importable - source ROS 2 first "
+                "(source /opt/ros/jazzy/setup.bash), or use --input dds, sim or bag:PATH"
+            ) from None
+        self._node: Any = None
+        self._executor: Any = None
+        self._subscriber: TopicSubscriber | None = None
+
+    def start(self, feed: Feed) -> None:
+        ros_args = self._options.ros_args
+        self._rclpy.init(args=["phytrace-edge", *(("--ros-args", *ros_args) if ros_args else ())])
+        self._node = self._api.create_node(NODE_NAME)
+        self._subscriber = subscribe_topics(
+            self._api,
+            self._node,
+            dict(self._options.topics),
+            feed.on_message,
+            dict(self._options.qos_overrides),
+        )
+        self._executor = self._executors.SingleThreadedExecutor()
+        self._executor.add_node(self._node)
+
+    def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
+        while not stop.is_set():
+            self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            beat()
+
+    def before_tick(self) -> None:
+        """Messages arrive through callbacks: nothing to take at the tick."""
+
+    def stop(self) -> None:
+        if self._node is not None:
+            self._node.destroy_node()
+        self._rclpy.try_shutdown()
+
+    def finished(self) -> Finished | None:
+        return None
+
+    def topic_stats(self) -> dict[str, dict[str, Any]]:
+        return self._subscriber.stats() if self._subscriber else {}

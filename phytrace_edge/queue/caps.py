@@ -1,0 +1,154 @@
+"""The byte and event caps, and what a full queue drops (QUEUE_ON_FULL).
+
+``Caps.make_room`` runs in the put's transaction: it drops the oldest unleased events
+(``drop_oldest``) or the newest incoming ones (``drop_newest``) until the put fits, and
+counts them by reason (``cap_bytes``, ``cap_events``). Asking SQLite how full the file
+is costs a query, so most puts are admitted by an estimate that is certain to be safe.
+"""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+from dataclasses import dataclass
+from typing import TypeVar
+
+from phytrace_edge.queue import leases
+from phytrace_edge.queue.database import bump_counters
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.rows import delete_range, depth_and_used_bytes
+from phytrace_edge.units import MIB
+
+ROW_OVERHEAD_BYTES = 96  # event_id, numbers, record and cell headers of one row
+PAGE_FILL = 1.15  # B-tree pages are not full: bytes on disk per byte stored
+WAL_RESERVE_MAX = 4 * MIB
+RECHECK_EVERY = 64
+MAX_DROP_ROUNDS = 8
+MEASURE_FOOTPRINT_AFTER = 32  # events, before which the footprint is only estimated
+
+Row = TypeVar("Row")
+
+
+@dataclass
+class RoomEstimate:
+    """Whether a put surely fits under the caps without asking SQLite: the last
+    measured usage plus twice what was added since (rows cost more than their bodies)
+    must stay under 90% of each cap, and a fresh measurement is taken every
+    ``RECHECK_EVERY`` puts. Near a cap every put measures."""
+
+    data_cap: int
+    max_events: int | None
+    depth: int = 0
+    used: int = 0
+    puts: int = RECHECK_EVERY  # measure on the first put
+
+    def is_certain(self, events: int, body_bytes: int) -> bool:
+        if self.puts >= RECHECK_EVERY:
+            return False
+        fits_bytes = (
+            self.used + 2 * (body_bytes + ROW_OVERHEAD_BYTES * events) <= 0.9 * self.data_cap
+        )
+        fits_events = self.max_events is None or self.depth + events <= 0.9 * self.max_events
+        return fits_bytes and fits_events
+
+    def added(self, events: int, body_bytes: int) -> None:
+        self.depth += events
+        self.used += 2 * (body_bytes + ROW_OVERHEAD_BYTES * events)
+        self.puts += 1
+
+    def measured(self, depth: int, used: int) -> None:
+        self.depth, self.used, self.puts = depth, used, 0
+
+    def forget(self) -> None:
+        """Measure at the next put (the file changed under us: VACUUM, a drop)."""
+        self.puts = RECHECK_EVERY
+
+
+def wal_reserve(max_bytes: int) -> int:
+    """The share of the byte cap kept for the WAL (SQLite's journal_size_limit)."""
+    return min(WAL_RESERVE_MAX, max_bytes // 8)
+
+
+class Caps:
+    """Applies QueueLimits to puts, inside the put's transaction."""
+
+    def __init__(self, limits: QueueLimits, page_size: int) -> None:
+        self.limits = limits
+        self.data_cap = limits.max_bytes - wal_reserve(limits.max_bytes)
+        self.page_size = page_size
+        self.room = RoomEstimate(self.data_cap, limits.max_events)
+
+    def make_room(
+        self, cursor: sqlite3.Cursor, rows: list[Row], sizes: list[int], now: float
+    ) -> list[Row]:
+        """Apply the caps before inserting ``rows`` (``sizes``: their stored bytes);
+        returns the rows that may go in, oldest first."""
+        incoming = sum(sizes)
+        if self.room.is_certain(len(rows), incoming):
+            self.room.added(len(rows), incoming)
+            return rows
+        kept = self._make_room_measured(cursor, rows, sizes, now)
+        depth, used = depth_and_used_bytes(cursor, self.page_size)
+        self.room.measured(depth + len(kept), used + sum(sizes[: len(kept)]))
+        return kept
+
+    def _make_room_measured(
+        self, cursor: sqlite3.Cursor, rows: list[Row], sizes: list[int], now: float
+    ) -> list[Row]:
+        limits = self.limits
+        depth, used = depth_and_used_bytes(cursor, self.page_size)
+        per_event = self._bytes_per_event(sizes, depth, used)
+        under_event_cap = limits.max_events is None or depth + len(rows) <= limits.max_events
+        if under_event_cap and used + per_event * len(rows) <= self.data_cap:
+            return rows  # the common case: one query, no drops
+
+        if limits.max_events is not None and depth + len(rows) > limits.max_events:
+            excess = depth + len(rows) - limits.max_events
+            if limits.on_full == "drop_oldest":
+                excess -= drop_oldest(cursor, excess, "cap_events", now)
+            if excess > 0:
+                bump_counters(cursor, **{"drop:cap_events": min(excess, len(rows))})
+                rows = rows[: max(0, len(rows) - excess)]
+
+        def over() -> int:
+            used = depth_and_used_bytes(cursor, self.page_size)[1]
+            return used + per_event * len(rows) - self.data_cap
+
+        excess_bytes = over()
+        if limits.on_full == "drop_oldest":
+            for _ in range(MAX_DROP_ROUNDS):  # deleted rows free whole pages only
+                if excess_bytes <= 0 or not drop_oldest(
+                    cursor, math.ceil(excess_bytes / per_event) + 1, "cap_bytes", now
+                ):
+                    break
+                excess_bytes = over()
+        if excess_bytes > 0:  # drop_newest, or everything older is being sent
+            keep = max(0, len(rows) - math.ceil(excess_bytes / per_event))
+            bump_counters(cursor, **{"drop:cap_bytes": len(rows) - keep})
+            rows = rows[:keep]
+        return rows
+
+    @staticmethod
+    def _bytes_per_event(sizes: list[int], depth: int, used: int) -> int:
+        """Disk bytes one incoming event will take: measured on the queue once it holds
+        enough events, else estimated from the incoming sizes."""
+        estimate = (sum(sizes) / len(sizes) + ROW_OVERHEAD_BYTES) * PAGE_FILL
+        if depth >= MEASURE_FOOTPRINT_AFTER:
+            estimate = max(estimate, used / depth)
+        return math.ceil(estimate)
+
+
+def drop_oldest(cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> int:
+    """Delete up to ``count`` oldest events not under a lease; counted as ``reason``."""
+    dropped = 0
+    for low, high in leases.free_ranges(cursor, now):
+        if dropped >= count:
+            break
+        ids = cursor.execute(
+            "SELECT id FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+            (low, high, count - dropped),
+        ).fetchall()
+        if ids:
+            dropped += delete_range(cursor, ids[0][0], ids[-1][0])
+    bump_counters(cursor, **{f"drop:{reason}": dropped})
+    return dropped

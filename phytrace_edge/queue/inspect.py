@@ -1,0 +1,142 @@
+"""What the queue holds and what its service last said, read cheaply and without
+writing: the ``QueueStats`` that ``status``, the metrics and the heartbeat show.
+
+``read_stats(path)`` opens the file read-only from any process (``status`` while the
+service runs, or after it stopped); ``QueueStore.stats()`` reads the same through the
+store's own connection. Both go through ``stats_from``, so they cannot disagree.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+import stat
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from phytrace_edge.errors import QueueError
+from phytrace_edge.queue.recovery import queue_error
+
+READ_TIMEOUT_S = 5.0
+
+
+@dataclass(frozen=True)
+class ServiceState:
+    """The running service's last heartbeat (``service_state.py`` writes it)."""
+
+    heartbeat_at: float
+    running: bool
+    document: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class QueueStats:
+    """The queue's counters and oldest/newest events, its files' size, and the service's
+    last heartbeat (None when no service ever ran on this queue)."""
+
+    path: str
+    counters: dict[str, int]
+    oldest_queued_at: float | None
+    newest_queued_at: float | None
+    file_bytes: int
+    quarantined: str | None
+    leased: int
+    service: ServiceState | None = None
+    max_bytes: int = 0
+    extra_drops: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def depth(self) -> int:
+        return self.counters.get("depth", 0)
+
+    @property
+    def stored_bytes(self) -> int:
+        return self.counters.get("stored_bytes", 0)
+
+    @property
+    def queued_total(self) -> int:
+        return self.counters.get("queued_total", 0)
+
+    @property
+    def acked_total(self) -> int:
+        return self.counters.get("acked_total", 0)
+
+    @property
+    def dead_letters(self) -> int:
+        return self.counters.get("dead_letters", 0)
+
+    @property
+    def drops(self) -> dict[str, int]:
+        """Events that left the queue other than by delivery, by reason."""
+        drops = {k[5:]: v for k, v in self.counters.items() if k.startswith("drop:") and v}
+        for reason, count in self.extra_drops.items():
+            drops[reason] = drops.get(reason, 0) + count
+        return {reason: n for reason, n in drops.items() if n}
+
+
+def file_bytes(path: Path) -> int:
+    """Bytes on disk of the queue: the database, its WAL and shared-memory files."""
+    total = 0
+    for suffix in ("", "-wal", "-shm"):
+        with contextlib.suppress(FileNotFoundError):
+            total += Path(f"{path}{suffix}").stat().st_size
+    return total
+
+
+def stats_from(connection: sqlite3.Connection, path: Path, now: float) -> QueueStats:
+    """Read the stats through ``connection`` (the caller holds any lock it needs)."""
+    tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
+    if "counters" not in tables:
+        raise QueueError(f"queue {path}: not a phytrace-edge queue - check QUEUE_PATH")
+    counters = {
+        name: int(value) for name, value in connection.execute("SELECT name, value FROM counters")
+    }
+    oldest = connection.execute("SELECT queued_at FROM events ORDER BY id LIMIT 1").fetchone()
+    newest = connection.execute("SELECT queued_at FROM events ORDER BY id DESC LIMIT 1").fetchone()
+    quarantined = connection.execute("SELECT value FROM meta WHERE key = 'quarantined'").fetchone()
+    leased = connection.execute(
+        "SELECT count(*) FROM leases WHERE expires_at > ?", (now,)
+    ).fetchone()[0]
+    row = None
+    if "service_state" in tables:  # a queue from before the heartbeat existed has none
+        row = connection.execute(
+            "SELECT heartbeat_at, running, document FROM service_state WHERE id = 1"
+        ).fetchone()
+    service = ServiceState(row[0], bool(row[1]), orjson.loads(row[2])) if row else None
+    return QueueStats(
+        path=str(path),
+        counters=counters,
+        oldest_queued_at=oldest[0] if oldest else None,
+        newest_queued_at=newest[0] if newest else None,
+        file_bytes=file_bytes(path),
+        quarantined=quarantined[0] if quarantined else None,
+        leased=int(leased),
+        service=service,
+    )
+
+
+def read_stats(path: Path, now: float) -> QueueStats | None:
+    """The stats of the queue at ``path`` without writing to it; None when there is no
+    file there. Raises a one-line ``QueueError`` for anything that is not a readable
+    queue (a directory, a device, another application's file, a corrupt file)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise QueueError(f"queue {path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(mode):
+        raise QueueError(f"queue {path}: not a regular file - set QUEUE_PATH to the queue file")
+    try:
+        connection = sqlite3.connect(
+            f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=READ_TIMEOUT_S
+        )
+        try:
+            return stats_from(connection, path, now)
+        finally:
+            connection.close()
+    except sqlite3.Error as exc:
+        raise queue_error(exc, path) from None

@@ -1,0 +1,48 @@
+"""Periodic upkeep of the queue file: TTL expiry and giving space back to the disk."""
+
+from __future__ import annotations
+
+from phytrace_edge.queue import leases
+from phytrace_edge.queue.database import Database, bump_counters
+from phytrace_edge.queue.rows import delete_range
+from phytrace_edge.units import MIB
+
+EXPIRE_CHUNK = 1000
+RECLAIM_MIN_BYTES = 1 * MIB
+
+
+def expire(db: Database, cutoff: float, now: float) -> int:
+    """Delete events queued before ``cutoff`` (not those being sent); the count."""
+    expired = 0
+    with db.transaction() as cursor:
+        for low, high in leases.free_ranges(cursor, now):
+            while True:
+                rows = cursor.execute(
+                    "SELECT id, queued_at FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+                    (low, high, EXPIRE_CHUNK),
+                ).fetchall()
+                # ids grow with time: the first fresh row ends the expired prefix
+                fresh_at = next((i for i, row in enumerate(rows) if row[1] >= cutoff), len(rows))
+                old = rows[:fresh_at]
+                if not old:
+                    break
+                expired += delete_range(cursor, old[0][0], old[-1][0])
+                low = old[-1][0] + 1
+                if fresh_at < len(rows):
+                    break
+        bump_counters(cursor, **{"drop:ttl": expired})
+    return expired
+
+
+def reclaim_space(db: Database, force: bool = False) -> None:
+    """Give space back to the file system once most of the file is free pages (a
+    backlog has drained): VACUUM then rewrites only the few live rows, which is quick.
+    Free pages of a partly drained queue are left for new events to reuse. The WAL is
+    truncated either way."""
+    pages, free = db.read(
+        "SELECT page_count, freelist_count FROM pragma_page_count(), pragma_freelist_count()"
+    )[0]
+    mostly_free = free * db.page_size >= RECLAIM_MIN_BYTES and free > pages - free
+    if force or mostly_free:
+        db.execute("VACUUM")
+    db.execute("PRAGMA wal_checkpoint(TRUNCATE)")

@@ -1,0 +1,49 @@
+"""SQL on the ``events`` table that keeps the counters exact: insert and delete rows,
+and measure how much of the file is in use. Each runs in the caller's transaction."""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Sequence
+from typing import Any
+
+from phytrace_edge.queue.database import bump_counters
+
+MAX_ID = 2**63 - 1
+
+
+def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **counters: int) -> None:
+    """Insert (event_id, queued_at, codec, dict_id, json_size, body) rows with ids from
+    next_id, keeping depth and stored_bytes exact, and add ``counters``."""
+    cursor.executemany(
+        "INSERT INTO events(id, event_id, queued_at, codec, dict_id, json_size, body) VALUES "
+        "((SELECT value FROM counters WHERE name = 'next_id') + ?, ?, ?, ?, ?, ?, ?)",
+        [(offset, *row) for offset, row in enumerate(rows)],
+    )
+    bump_counters(
+        cursor,
+        next_id=len(rows),
+        depth=len(rows),
+        stored_bytes=sum(len(r[5]) for r in rows),
+        **counters,
+    )
+
+
+def delete_range(cursor: sqlite3.Cursor, first_id: int, last_id: int) -> int:
+    """Delete rows first_id..last_id, keeping depth and stored_bytes exact; the count."""
+    count, size = cursor.execute(
+        "SELECT count(*), coalesce(sum(length(body)), 0) FROM events WHERE id BETWEEN ? AND ?",
+        (first_id, last_id),
+    ).fetchone()
+    cursor.execute("DELETE FROM events WHERE id BETWEEN ? AND ?", (first_id, last_id))
+    bump_counters(cursor, depth=-count, stored_bytes=-size)
+    return int(count)
+
+
+def depth_and_used_bytes(cursor: sqlite3.Cursor, page_size: int) -> tuple[int, int]:
+    """Events queued, and bytes of the database's pages in use (free pages excluded)."""
+    depth, pages, free = cursor.execute(
+        "SELECT (SELECT value FROM counters WHERE name = 'depth'), page_count, freelist_count "
+        "FROM pragma_page_count(), pragma_freelist_count()"
+    ).fetchone()
+    return int(depth or 0), int((pages - free) * page_size)

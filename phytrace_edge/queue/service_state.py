@@ -1,0 +1,21 @@
+"""The running service's heartbeat: one row of the queue database, rewritten every few
+seconds with the service's figures, that ``status`` reads from another process. The row
+survives the process, so ``status`` can say when the service last lived and what it
+last saw, whether or not it runs now."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import orjson
+
+from phytrace_edge.queue.database import Database
+
+
+def write_service_state(db: Database, document: dict[str, Any], running: bool, now: float) -> None:
+    with db.transaction() as cursor:
+        cursor.execute(
+            "INSERT OR REPLACE INTO service_state(id, heartbeat_at, running, document) "
+            "VALUES (1, ?, ?, ?)",
+            (now, int(running), orjson.dumps(document).decode()),
+        )

@@ -1,0 +1,92 @@
+"""The running service's figures, as ``status`` (another process) and the metrics see
+them: per-second rates, per-topic figures and the document the heartbeat writes into
+the queue every ``HEARTBEAT_S``."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from phytrace_edge import __version__
+from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.ship.sender import SendStats
+
+HEARTBEAT_S = 2.0
+RATE_SMOOTHING = 0.3  # weight of the newest interval in the rate averages
+
+
+@dataclass(frozen=True)
+class Figures:
+    """Everything the metrics endpoint shows, read at one moment."""
+
+    queue: QueueStats
+    sender: SendStats
+    events_built: int
+    writer_dropped: int
+    topics: dict[str, dict[str, Any]]
+    thread_restarts: dict[str, int]
+    now: float
+
+
+@dataclass
+class Rates:
+    """Per-second rates from counters sampled at each heartbeat (exponential average)."""
+
+    previous: dict[str, float] = field(default_factory=dict)
+    at: float | None = None
+    rates: dict[str, float] = field(default_factory=dict)
+
+    def update(self, counters: Mapping[str, float], now: float) -> dict[str, float]:
+        if self.at is not None and now > self.at:
+            for name, value in counters.items():
+                instant = max(0.0, value - self.previous.get(name, value)) / (now - self.at)
+                old = self.rates.get(name, instant)
+                self.rates[name] = old + RATE_SMOOTHING * (instant - old)
+        self.previous, self.at = dict(counters), now
+        return {name: round(rate, 3) for name, rate in self.rates.items()}
+
+
+def topic_report(
+    received: Mapping[str, int],
+    rejected: Mapping[tuple[str, str], int],
+    ages: Mapping[str, float],
+    source_stats: Mapping[str, Mapping[str, Any]],
+    rates: Mapping[str, float],
+) -> dict[str, dict[str, Any]]:
+    """Per topic: messages received and their rate, the age of the latest, rejects by
+    reason, and what the source knows (publishers, QoS problems). Every topic the
+    source subscribes to appears, also one that never delivered a message."""
+    topics = sorted(set(received) | set(source_stats))
+    return {
+        topic: {
+            "received": received.get(topic, 0),
+            "rate_hz": rates.get(f"topic:{topic}", 0.0),
+            "last_seen_age_s": ages.get(topic),
+            "rejected": {reason: n for (t, reason), n in rejected.items() if t == topic},
+            **source_stats.get(topic, {}),
+        }
+        for topic in topics
+    }
+
+
+def service_document(
+    identity: Mapping[str, Any],
+    sender: Mapping[str, Any],
+    topics: Mapping[str, Any],
+    stages: Mapping[str, Any],
+    extra: Mapping[str, Any],
+    started_at: float,
+) -> dict[str, Any]:
+    """What the heartbeat row holds (``status`` reads it)."""
+    return {
+        "pid": os.getpid(),
+        "version": __version__,
+        "started_at": started_at,
+        **identity,
+        "sender": dict(sender),
+        "topics": dict(topics),
+        "stages": dict(stages),
+        **extra,
+    }
