@@ -9,7 +9,6 @@ files pass ``${FLEET_ID}`` through as an empty string when the operator did not 
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -130,14 +129,13 @@ def default_state_dir(env: Mapping[str, str]) -> Path:
 
 
 def settings_from_environment(
-    flags: Mapping[str, Any] | None = None,
-    env: Mapping[str, str] | None = None,
+    flags: Mapping[str, Any] | None,
+    env: Mapping[str, str],
     config_path: str | None = None,
     ros_params: Mapping[str, Any] | None = None,
 ) -> LoadedSettings:
-    """Load settings the way the CLI does: flags, ``os.environ``, the config file named
-    by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
-    env = dict(os.environ) if env is None else env
+    """Load settings the way the CLI does: flags, the process environment ``env``, the
+    config file named by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
     path = config_path or env.get("PHYTRACE_CONFIG") or None
     file_values = read_config_file(path) if path else {}
     return load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")

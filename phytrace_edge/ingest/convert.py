@@ -12,6 +12,8 @@ import math
 import numbers
 from typing import Any
 
+from phytrace_edge.errors import MalformedMessage
+
 TEXT_MAX_CHARS = 256
 
 
@@ -134,3 +136,40 @@ def compact(value: Any) -> Any:
     if isinstance(value, list):
         return [compact(item) for item in value]
     return value
+
+
+def header_fields(msg: Any) -> dict[str, Any]:
+    """``stamp_ns`` and ``frame_id`` of a message's ``std_msgs/Header``."""
+    header = getattr(msg, "header", None)
+    return {"stamp_ns": stamp_ns(header), "frame_id": text(getattr(header, "frame_id", None))}
+
+
+def pose_fields(pose: Any) -> dict[str, Any]:
+    """``geometry_msgs/Pose`` -> position in metres and yaw in degrees."""
+    position = xyz(getattr(pose, "position", None), ("x_m", "y_m", "z_m"))
+    rpy = quaternion_to_rpy_deg(getattr(pose, "orientation", None))
+    return {**position, "yaw_deg": rpy[2] if rpy else None}
+
+
+def first_number(sequence: Any) -> float | None:
+    """The first number of a sequence field, or None when there is none."""
+    try:
+        return finite(sequence[0])
+    except (TypeError, IndexError, KeyError):
+        return None
+
+
+def sequence_items(msg: Any, name: str, limit: int) -> Any:
+    """The first ``limit`` items of a sequence field: a list, ``array.array`` or numpy
+    array (sliced, not copied item by item); an unset field is empty."""
+    sequence = getattr(msg, name, None)
+    if sequence is None:
+        return ()
+    if isinstance(sequence, (str, bytes)):
+        raise MalformedMessage("bad_sequence", f"{name} is text, not a sequence")
+    try:
+        return sequence[:limit]
+    except (TypeError, KeyError):
+        raise MalformedMessage(
+            "bad_sequence", f"{name} is {type(sequence).__name__}, not a sequence"
+        ) from None

@@ -23,9 +23,12 @@ from phytrace_edge.ingest.convert import (
     compact,
     degrees,
     finite,
+    first_number,
+    header_fields,
     integer,
+    pose_fields,
     quaternion_to_rpy_deg,
-    stamp_ns,
+    sequence_items,
     text,
     wrap_degrees,
     xyz,
@@ -61,28 +64,16 @@ _NO_FIX, _FIX, _SBAS_FIX, _GBAS_FIX = -1, 0, 1, 2
 _COVARIANCE_UNKNOWN = 0
 
 
-def _header(msg: Any) -> Reading:
-    header = getattr(msg, "header", None)
-    return {"stamp_ns": stamp_ns(header), "frame_id": text(getattr(header, "frame_id", None))}
-
-
-def _pose(pose: Any) -> Reading:
-    """``geometry_msgs/Pose`` -> position in metres and yaw in degrees."""
-    position = xyz(getattr(pose, "position", None), ("x_m", "y_m", "z_m"))
-    rpy = quaternion_to_rpy_deg(getattr(pose, "orientation", None))
-    return {**position, "yaw_deg": rpy[2] if rpy else None}
-
-
 def handle_odometry(msg: Any) -> Reading:
     """``nav_msgs/Odometry`` -> local pose (location) and body velocity (motion).
 
     The pose is in ``header.frame_id`` (odom or map), the twist in ``child_frame_id``
     (the robot body, x forward, y left: REP-103).
     """
-    head = _header(msg)
+    head = header_fields(msg)
     twist = getattr(getattr(msg, "twist", None), "twist", None)
     angular = getattr(twist, "angular", None)
-    pose = _pose(getattr(getattr(msg, "pose", None), "pose", None))
+    pose = pose_fields(getattr(getattr(msg, "pose", None), "pose", None))
     return compact(
         {
             **head,
@@ -110,10 +101,10 @@ def handle_battery_state(msg: Any) -> Reading:
     soc = min(100.0, max(0.0, percentage * 100.0)) if in_range else None  # type: ignore[operator]
     status = integer(getattr(msg, "power_supply_status", None))
     present = getattr(msg, "present", None)
-    cells = [finite(v) for v in _items(msg, "cell_voltage", MAX_CELLS)]
+    cells = [finite(v) for v in sequence_items(msg, "cell_voltage", MAX_CELLS)]
     return compact(
         {
-            **_header(msg),
+            **header_fields(msg),
             "battery": {
                 "voltage_v": finite(getattr(msg, "voltage", None)),
                 "current_a": finite(getattr(msg, "current", None)),
@@ -166,7 +157,7 @@ def handle_laser_scan(msg: Any) -> Reading:
         if angle_min is not None and increment is not None:
             angle = finite(math.degrees(angle_min + index * increment))
             bearing = None if angle is None else wrap_degrees(angle)
-    head = _header(msg)
+    head = header_fields(msg)
     return compact(
         {
             **head,
@@ -191,11 +182,11 @@ def handle_imu(msg: Any) -> Reading:
     By REP-145 an ``orientation_covariance[0]`` of -1 means the IMU gives no
     orientation; it is then left out.
     """
-    no_orientation = _first_item(getattr(msg, "orientation_covariance", None)) == -1
+    no_orientation = first_number(getattr(msg, "orientation_covariance", None)) == -1
     rpy = None if no_orientation else quaternion_to_rpy_deg(getattr(msg, "orientation", None))
     return compact(
         {
-            **_header(msg),
+            **header_fields(msg),
             "imu": {
                 "orientation_deg": (
                     {"roll": rpy[0], "pitch": rpy[1], "yaw": rpy[2]} if rpy else None
@@ -214,7 +205,7 @@ def handle_twist(msg: Any) -> Reading:
     """
     twist = getattr(msg, "twist", msg)
     linear = getattr(twist, "linear", None)
-    head = _header(msg) if hasattr(msg, "header") else {}
+    head = header_fields(msg) if hasattr(msg, "header") else {}
     return compact(
         {
             **head,
@@ -248,7 +239,7 @@ def handle_nav_sat_fix(msg: Any) -> Reading:
     if has_fix and longitude is not None:
         gps.update(latitude=latitude, longitude=longitude, altitude_m=altitude)
         gps["horizontal_accuracy_m"] = _horizontal_accuracy(msg)
-    return compact({**_header(msg), "gps": gps})
+    return compact({**header_fields(msg), "gps": gps})
 
 
 def _fix_type(status: int | None, altitude: float | None) -> str:
@@ -267,7 +258,7 @@ def _horizontal_accuracy(msg: Any) -> float | None:
     """1-sigma horizontal error in metres from the ENU position covariance."""
     if integer(getattr(msg, "position_covariance_type", None)) in (None, _COVARIANCE_UNKNOWN):
         return None
-    covariance = list(_items(msg, "position_covariance", 9))
+    covariance = list(sequence_items(msg, "position_covariance", 9))
     if len(covariance) < 5:
         return None
     east, north = finite(covariance[0]), finite(covariance[4])
@@ -283,7 +274,7 @@ def handle_diagnostic_array(msg: Any) -> Reading:
     unknown level value becomes ``unknown`` rather than being dropped.
     """
     statuses = []
-    for status in _items(msg, "status", 1024):
+    for status in sequence_items(msg, "status", 1024):
         level = integer(getattr(status, "level", None))
         name = text(getattr(status, "name", None)) or "(unnamed)"
         statuses.append(
@@ -298,13 +289,13 @@ def handle_diagnostic_array(msg: Any) -> Reading:
                 }
             )
         )
-    return compact({**_header(msg), "statuses": statuses})
+    return compact({**header_fields(msg), "statuses": statuses})
 
 
 def handle_pose_stamped(msg: Any) -> Reading:
     """``geometry_msgs/PoseStamped`` on /goal_pose -> navigation goal."""
-    head = _header(msg)
-    pose = _pose(getattr(msg, "pose", None))
+    head = header_fields(msg)
+    pose = pose_fields(getattr(msg, "pose", None))
     return compact({**head, "goal": {"frame_id": head["frame_id"], **pose}})
 
 
@@ -314,11 +305,11 @@ def handle_joint_state(msg: Any) -> Reading:
     position is rad (or m for prismatic joints), velocity rad/s, effort N·m (or N).
     ROS allows the value arrays to be empty or shorter than ``name``.
     """
-    names = list(_items(msg, "name", MAX_JOINTS))
+    names = list(sequence_items(msg, "name", MAX_JOINTS))
     values = {
-        "position_rad": list(_items(msg, "position", MAX_JOINTS)),
-        "velocity_rps": list(_items(msg, "velocity", MAX_JOINTS)),
-        "effort": list(_items(msg, "effort", MAX_JOINTS)),
+        "position_rad": list(sequence_items(msg, "position", MAX_JOINTS)),
+        "velocity_rps": list(sequence_items(msg, "velocity", MAX_JOINTS)),
+        "effort": list(sequence_items(msg, "effort", MAX_JOINTS)),
     }
     joints = []
     for index, name in enumerate(names):
@@ -326,7 +317,7 @@ def handle_joint_state(msg: Any) -> Reading:
         for key, column in values.items():
             joint[key] = finite(column[index]) if index < len(column) else None
         joints.append(compact(joint))
-    return compact({**_header(msg), "joints": joints})
+    return compact({**header_fields(msg), "joints": joints})
 
 
 # /delivery/status JSON key -> (reading section, field)
@@ -393,27 +384,3 @@ def _delivery_text(value: Any) -> str | None:
     if not isinstance(value, str) or len(value) > 256:
         return None
     return value
-
-
-def _first_item(sequence: Any) -> float | None:
-    """The first number of a sequence field, or None when there is none."""
-    try:
-        return finite(sequence[0])
-    except (TypeError, IndexError, KeyError):
-        return None
-
-
-def _items(msg: Any, name: str, limit: int) -> Any:
-    """The first ``limit`` items of a sequence field: a list, ``array.array`` or numpy
-    array (sliced, not copied item by item); an unset field is empty."""
-    sequence = getattr(msg, name, None)
-    if sequence is None:
-        return ()
-    if isinstance(sequence, (str, bytes)):
-        raise MalformedMessage("bad_sequence", f"{name} is text, not a sequence")
-    try:
-        return sequence[:limit]
-    except (TypeError, KeyError):
-        raise MalformedMessage(
-            "bad_sequence", f"{name} is {type(sequence).__name__}, not a sequence"
-        ) from None

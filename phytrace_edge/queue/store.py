@@ -17,6 +17,7 @@ database's lock, and each thread has its own compressors.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 import sqlite3
@@ -73,6 +74,7 @@ class QueueStore:
         self.lease_s = lease_s
         self._clock = clock
         self._owner = uuid.uuid4().hex
+        self._claims = itertools.count(1)
         self.codecs = Codecs(compression)
         self._caps = Caps(limits, db.page_size)
         self._wal_reserve = wal_reserve(limits.max_bytes)
@@ -186,7 +188,7 @@ class QueueStore:
             insert_rows(
                 cursor,
                 [(eid, now, e.codec, e.dict_id, size, e.body) for eid, size, e in accepted],
-                queued_total=len(accepted),
+                queued_total=len(rows),  # every event put, whatever the caps did with it
             )
         self._bound_wal()
         return PutResult(len(accepted), len(rows) - len(accepted))
@@ -208,11 +210,13 @@ class QueueStore:
             return False
 
     def _count_drop(self, reason: str, count: int) -> None:
+        """Count events put and dropped at once (the disk is full)."""
+        counts = {f"drop:{reason}": count, "queued_total": count}
         try:
             with self._db.transaction() as cursor:
-                bump_counters(cursor, **{f"drop:{reason}": count})
+                bump_counters(cursor, **counts)
         except QueueError:
-            self._db.defer_counts(**{f"drop:{reason}": count})
+            self._db.defer_counts(**counts)
 
     # ------------------------------------------------------------------ claim / ack
 
@@ -241,19 +245,22 @@ class QueueStore:
             rows = rows[:keep]
             if not rows:
                 return None
-            leases.take(cursor, rows[0][0], rows[-1][0], self._owner, now + self.lease_s)
+            # each claim its own token: releasing a stale claim never frees a newer one
+            token = f"{self._owner}:{next(self._claims)}"
+            leases.take(cursor, rows[0][0], rows[-1][0], token, now + self.lease_s)
         events = [
             QueuedEvent(row_id, event_id, self.codecs.decode(codec, dict_id, body))
             for row_id, event_id, codec, dict_id, _, body in rows
         ]
-        return Batch(rows[0][0], rows[-1][0], self._owner, events)
+        return Batch(rows[0][0], rows[-1][0], token, events)
 
     def ack(self, batch: Batch, dead_letters: Sequence[DeadLetter] = ()) -> None:
         """PhyCloud has the batch: delete it, moving ``dead_letters`` aside first."""
         now = self._clock()
         with self._db.transaction() as cursor:
+            rejected = 0  # those still queued: after a lease ran out, another may have them
             for dead in dead_letters:
-                cursor.execute(
+                rejected += cursor.execute(
                     "INSERT INTO dead_letters(event_id, queued_at, dead_at, reason, status_code, "
                     "response, codec, dict_id, json_size, body) "
                     "SELECT event_id, queued_at, ?, ?, ?, ?, codec, dict_id, json_size, body "
@@ -265,8 +272,7 @@ class QueueStore:
                         (dead.response or "")[:4096] or None,
                         dead.queue_id,
                     ),
-                )
-            rejected = len(dead_letters)
+                ).rowcount
             deleted = delete_range(cursor, batch.first_id, batch.last_id)
             leases.give_back(cursor, batch.first_id, batch.owner)
             bump_counters(

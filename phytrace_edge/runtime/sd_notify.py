@@ -15,8 +15,7 @@ from collections.abc import Mapping
 
 
 class SystemdNotifier:
-    def __init__(self, env: Mapping[str, str] | None = None) -> None:
-        env = os.environ if env is None else env
+    def __init__(self, env: Mapping[str, str]) -> None:
         address = env.get("NOTIFY_SOCKET", "")
         self._address = "\0" + address[1:] if address.startswith("@") else address
         watchdog_usec = env.get("WATCHDOG_USEC", "")

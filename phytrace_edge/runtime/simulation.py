@@ -9,7 +9,6 @@ dispatcher, builder and sample tick as ``phytrace-edge run``, then to ``sink``.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -65,7 +64,7 @@ def run_simulation(
             counts["sent"] += 1
 
     options = wiring.source_options(
-        settings, os.environ, seed=seed, virtual_time=not realtime, max_ticks=num_ticks
+        settings, {}, seed=seed, virtual_time=not realtime, max_ticks=num_ticks
     )
     source = SimSource(options)
     builder_options = wiring.builder_options(settings)

@@ -19,6 +19,7 @@ every robot's backlog in the same second.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import random
 import threading
@@ -29,7 +30,7 @@ from typing import Any
 
 from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
 
-from phytrace_edge.errors import EndpointRefusedError, TransientSendError
+from phytrace_edge.errors import EndpointRefusedError, QueueError, TransientSendError
 from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.options import SendPolicy
@@ -175,8 +176,9 @@ class Sender:
             return 0
         try:
             dead = self._deliver(batch, batch.events)
-        except Stopped:
-            self.store.release(batch)
+        except BaseException:  # stopped, or a failure the supervisor restarts us after
+            with contextlib.suppress(QueueError):  # else the lease runs out by itself
+                self.store.release(batch)
             raise
         self.store.ack(batch, dead)
         if dead:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import time
@@ -107,6 +108,42 @@ def test_status_while_running_and_after_a_clean_stop(running, tmp_path: Path, st
 def test_status_without_a_queue(tmp_path: Path) -> None:
     result = cli("status", QUEUE_PATH=str(tmp_path / "none.db"))
     assert result.returncode == 3 and "never ran" in result.stderr
+
+
+def not_a_queue(tmp_path: Path, kind: str) -> Path:
+    """A path that is not a readable queue, of the given kind."""
+    path = tmp_path / kind
+    if kind == "directory":
+        path.mkdir()
+    elif kind == "text file":
+        path.write_text("hello\n" * 100)
+    elif kind == "foreign sqlite":
+        with sqlite3.connect(path) as db:
+            db.execute("CREATE TABLE photos(id INTEGER PRIMARY KEY, name TEXT)")
+    elif kind == "corrupt sqlite":
+        with sqlite3.connect(path) as db:
+            db.execute("CREATE TABLE counters(name TEXT PRIMARY KEY, value INTEGER)")
+            db.executemany("INSERT INTO counters VALUES (?, ?)", [(str(i), i) for i in range(500)])
+        data = bytearray(path.read_bytes())
+        data[100:4096] = b"\xff" * (4096 - 100)  # the first page's b-tree header is gone
+        path.write_bytes(bytes(data))
+    elif kind == "char device":
+        return Path("/dev/null")
+    return path
+
+
+@pytest.mark.parametrize(
+    "kind", ["directory", "text file", "foreign sqlite", "corrupt sqlite", "char device"]
+)
+def test_status_on_a_path_that_is_not_a_queue_is_one_line(tmp_path: Path, kind: str) -> None:
+    path = not_a_queue(tmp_path, kind)
+    mode = path.stat().st_mode
+    result = cli("status", QUEUE_PATH=str(path))
+    assert result.returncode == 4, result.stderr
+    assert "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert result.stderr.startswith(f"phytrace-edge: error: queue {path}: ")
+    assert path.stat().st_mode == mode  # status never changes what it reads
 
 
 def test_status_is_unhealthy_when_the_key_is_refused(tmp_path: Path, stub) -> None:

@@ -74,7 +74,7 @@ def test_launch_files_pass_the_reference_parameters(
     command = [resolve(part, values) for part in process.kwargs["cmd"]]
     assert command[:4] == ["phytrace-edge", "run", "--input", bridge_input]
     ros_args = command[command.index("--ros-args") + 1 :]
-    loaded = settings_from_environment(env={}, ros_params=ros_parameters(ros_args))
+    loaded = settings_from_environment(None, {}, ros_params=ros_parameters(ros_args))
     assert loaded.settings.source_id == "launched-bot"
     assert loaded.settings.sample_rate_hz == 10.0
     assert loaded.origins["source_id"] == "ros param"

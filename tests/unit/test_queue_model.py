@@ -1,95 +1,292 @@
-"""Model-based test: random put / claim / ack / release / reopen sequences against the
-real store and a plain list, which must agree on every step."""
+"""Model-based test of the queue's whole life, in the manner of Vector's buffer model
+tests: random sequences of put / claim / ack (with dead letters) / release / requeue /
+clock steps / TTL expiry / reopen after a crash, against the real store on a real file
+and a trivial model, under small byte and event caps with both on-full policies.
+
+Invariants: the store holds exactly the events the model says, in order; every event
+ever put is in exactly one place (queued, delivered, dropped by reason, expired or
+dead-lettered) and each is counted; a full queue drops only what its policy allows.
+"""
 
 from __future__ import annotations
 
+import base64
+import random
 import shutil
+import sqlite3
 import tempfile
 import uuid
+from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
-import orjson
 from hypothesis import settings
 from hypothesis import strategies as st
-from hypothesis.stateful import Bundle, RuleBasedStateMachine, consumes, invariant, rule
+from hypothesis.stateful import (
+    Bundle,
+    RuleBasedStateMachine,
+    consumes,
+    initialize,
+    invariant,
+    precondition,
+    rule,
+)
 
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.records import Batch
+from phytrace_edge.queue.records import Batch, DeadLetter
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.units import GIB, MIB
+from phytrace_edge.units import GIB, KIB, MIB
+
+LEASE_S = 10.0
+TTL_S = 100.0
 
 
-class QueueMachine(RuleBasedStateMachine):
-    batches = Bundle("batches")
+def seq_of(event_id: str) -> int:
+    return uuid.UUID(event_id).int
+
+
+@dataclass
+class Claim:
+    batch: Batch
+    seqs: list[int]
+    rows: set[tuple[int, int]]  # (seq, incarnation): a requeued event is a new row
+    expires_at: float
+
+
+class QueueAccounting(RuleBasedStateMachine):
+    claims = Bundle("claims")
 
     def __init__(self) -> None:
         super().__init__()
-        self.dir = Path(tempfile.mkdtemp(prefix="queue-model-"))
-        self.store = self._open()
-        self.model: list[int] = []  # seqs in the queue, oldest first
-        self.leased: set[int] = set()
-        self.next_seq = 0
+        self.dir = Path(tempfile.mkdtemp(prefix="queue-accounting-"))
+        self.now = 1_000_000.0
+        self.next_seq = 1
+        self.queue: list[int] = []  # the model: seqs queued, oldest first
+        self.queued_at: dict[int, float] = {}
+        self.open_claims: list[Claim] = []
+        self.dead: list[int] = []
+        self.fate: Counter[str] = Counter()  # acked, drop:<reason>
+        self.requeued = 0
+        self.incarnation: Counter[int] = Counter()
+        self.generation = 0
 
-    def _open(self) -> QueueStore:
+    @initialize(
+        on_full=st.sampled_from(["drop_oldest", "drop_newest"]),
+        max_events=st.sampled_from([None, 8, 25]),
+        small_bytes=st.booleans(),
+    )
+    def open_store(self, on_full: str, max_events: int | None, small_bytes: bool) -> None:
+        self.limits = QueueLimits(
+            max_bytes=160 * KIB if small_bytes else GIB,
+            max_events=max_events,
+            on_full=on_full,
+            ttl_s=TTL_S,
+        )
+        self.store = self._open(self.dir / "q0.db")
+
+    def _open(self, path: Path) -> QueueStore:
+        # durability across crashes is what the copies test; fsyncs would only slow it
         return QueueStore.open(
-            self.dir / "q.db", limits=QueueLimits(max_bytes=GIB), compression="zstd", lease_s=3600
+            path, limits=self.limits, sync="normal", clock=lambda: self.now, lease_s=LEASE_S
         )
 
-    @rule(count=st.integers(1, 20))
-    def put(self, count: int) -> None:
+    # ------------------------------------------------------------------ the model
+
+    def leased(self) -> set[int]:
+        return {
+            s
+            for c in self.open_claims
+            if c.expires_at > self.now
+            for s in c.seqs
+            if (s, self.incarnation[s]) in c.rows
+        }
+
+    def stored_seqs(self) -> list[int]:
+        rows = self.store._db.read("SELECT event_id FROM events ORDER BY id")
+        return [seq_of(event_id) for (event_id,) in rows]
+
+    # ------------------------------------------------------------------ rules
+
+    @rule(count=st.integers(1, 12), pad=st.integers(100, 1500))
+    def put(self, count: int, pad: int) -> None:
         seqs = list(range(self.next_seq, self.next_seq + count))
         self.next_seq += count
-        events = [{"event_id": str(uuid.UUID(int=s)), "seq": s} for s in seqs]
-        assert self.store.put_many(events).accepted == count
-        self.model.extend(seqs)
+        events = [
+            {
+                "event_id": str(uuid.UUID(int=s)),
+                "pad": base64.b64encode(random.Random(s).randbytes(pad)).decode()[:pad],
+            }
+            for s in seqs
+        ]
+        leased, before = self.leased(), list(self.queue)
+        drops_before = self.store.stats().drops
+        result = self.store.put_many(events)
+        assert result.accepted + result.dropped == count
 
-    @rule(target=batches, limit=st.integers(1, 15))
-    def claim(self, limit: int) -> Batch | None:
-        # the model: the oldest run of unleased events, stopping at a leased one
-        free = [i for i, s in enumerate(self.model) if s not in self.leased]
+        stored = self.stored_seqs()
+        removed = [s for s in before if s not in set(stored)]
+        kept_new = [s for s in seqs if s in set(stored)]
+        assert kept_new == seqs[: len(kept_new)], "only the newest incoming are refused"
+        assert len(kept_new) == result.accepted
+        assert not set(removed) & leased, "events being sent are never dropped"
+        if self.limits.on_full == "drop_newest":
+            assert removed == [], "drop_newest keeps what is queued"
+        else:
+            unleased = [s for s in before if s not in leased]
+            assert removed == unleased[: len(removed)], "drop_oldest drops the oldest"
+            if kept_new != seqs:
+                assert removed == unleased, "new events are refused only when nothing is left"
+        if self.limits.max_events is not None:
+            assert len(stored) <= self.limits.max_events
+
+        dropped_now = len(removed) + count - len(kept_new)
+        drops_after = self.store.stats().drops
+        by_cap = sum(
+            drops_after.get(r, 0) - drops_before.get(r, 0) for r in ("cap_bytes", "cap_events")
+        )
+        assert by_cap == dropped_now
+        for reason in ("cap_bytes", "cap_events"):
+            self.fate[f"drop:{reason}"] += drops_after.get(reason, 0) - drops_before.get(reason, 0)
+        self.queue = [s for s in before if s not in set(removed)] + kept_new
+        for s in kept_new:
+            self.queued_at[s] = self.now
+
+    @rule(target=claims, limit=st.integers(1, 10))
+    def claim(self, limit: int) -> Claim | None:
+        leased = self.leased()
         expected: list[int] = []
-        if free:
-            for seq in self.model[free[0] :]:
-                if seq in self.leased or len(expected) == limit:
+        for s in self.queue:  # the oldest run of unleased events, up to a leased one
+            if s in leased:
+                if expected:
                     break
-                expected.append(seq)
+                continue
+            expected.append(s)
+            if len(expected) == limit:
+                break
         batch = self.store.claim_batch(limit, 64 * MIB)
-        got = [] if batch is None else [orjson.loads(e.json)["seq"] for e in batch.events]
+        got = [] if batch is None else [seq_of(e.event_id) for e in batch.events]
         assert got == expected
-        self.leased.update(got)
-        return batch
-
-    @rule(batch=consumes(batches))
-    def ack(self, batch: Batch | None) -> None:
         if batch is None:
-            return
-        self.store.ack(batch)
-        seqs = {orjson.loads(e.json)["seq"] for e in batch.events}
-        self.model = [s for s in self.model if s not in seqs]
-        self.leased -= seqs
+            return None
+        claim = Claim(batch, got, {(q, self.incarnation[q]) for q in got}, self.now + LEASE_S)
+        self.open_claims.append(claim)
+        return claim
 
-    @rule(batch=consumes(batches))
-    def release(self, batch: Batch | None) -> None:
-        if batch is None:
+    @rule(claim=consumes(claims), reject=st.lists(st.integers(0, 9), max_size=3, unique=True))
+    def ack(self, claim: Claim | None, reject: list[int]) -> None:
+        if claim is None:
             return
-        self.store.release(batch)
-        self.leased -= {orjson.loads(e.json)["seq"] for e in batch.events}
+        events = claim.batch.events
+        dead = [DeadLetter(events[i].id, "rejected: test") for i in reject if i < len(events)]
+        self.store.ack(claim.batch, dead)
+        still = {q for q in self.queue if (q, self.incarnation[q]) in claim.rows}
+        dead_seqs = [seq_of(events[i].event_id) for i in reject if i < len(events)]
+        dead_seqs = [s for s in dead_seqs if s in still]
+        self.dead += dead_seqs
+        self.fate["drop:rejected"] += len(dead_seqs)
+        self.fate["acked"] += len([s for s in claim.seqs if s in still]) - len(dead_seqs)
+        self.queue = [s for s in self.queue if s not in still]
+        self.open_claims.remove(claim)
+
+    @rule(claim=consumes(claims))
+    def release(self, claim: Claim | None) -> None:
+        if claim is None:
+            return
+        self.store.release(claim.batch)
+        self.open_claims.remove(claim)
+
+    @precondition(lambda self: self.dead)
+    @rule()
+    def requeue_dead_letters(self) -> None:
+        assert self.store.dead_letters.requeue() == len(self.dead)
+        for s in self.dead:
+            self.queued_at[s] = self.now
+            self.incarnation[s] += 1
+        self.queue += self.dead
+        self.requeued += len(self.dead)
+        self.dead = []
+
+    @rule(seconds=st.sampled_from([1.0, LEASE_S + 1, TTL_S / 2]))
+    def time_passes(self, seconds: float) -> None:
+        self.now += seconds
 
     @rule()
-    def reopen(self) -> None:
+    def expire(self) -> None:
+        leased, cutoff = self.leased(), self.now - TTL_S
+        old = [s for s in self.queue if self.queued_at[s] < cutoff and s not in leased]
+        assert self.store.expire() == len(old)
+        self.fate["drop:ttl"] += len(old)
+        self.queue = [s for s in self.queue if s not in set(old)]
+
+    @rule(mid_transaction=st.booleans())
+    def crash_and_reopen(self, mid_transaction: bool) -> None:
+        """Power is cut: the files as they are on disk now become the queue. Mid
+        transaction, an uncommitted put is in the WAL of the copy, and must vanish."""
+        self.generation += 1
+        copy = self.dir / f"q{self.generation}.db"
+        path = self.store.path
+        if mid_transaction:
+            # another writer's transaction, big enough that its pages spill into the WAL
+            # before COMMIT: the copy holds uncommitted frames that recovery must ignore
+            writer = sqlite3.connect(path, isolation_level=None, timeout=5)
+            try:
+                writer.execute("PRAGMA cache_size = 1")
+                writer.execute("BEGIN IMMEDIATE")
+                writer.executemany(
+                    "INSERT INTO events(event_id, queued_at, codec, json_size, body) "
+                    "VALUES (?, ?, 0, 2, ?)",
+                    [(str(uuid.UUID(int=2**100 + i)), self.now, b"x" * 4000) for i in range(50)],
+                )
+                self._copy(path, copy)
+                writer.execute("ROLLBACK")
+            finally:
+                writer.close()
+        else:
+            self._copy(path, copy)
         self.store.close()
-        self.store = self._open()
+        self.store = self._open(copy)
+
+    @staticmethod
+    def _copy(path: Path, copy: Path) -> None:
+        for suffix in ("", "-wal"):
+            source = Path(f"{path}{suffix}")
+            if source.exists():
+                shutil.copyfile(source, f"{copy}{suffix}")
+
+    # ------------------------------------------------------------------ invariants
 
     @invariant()
-    def counters_agree(self) -> None:
+    def the_store_holds_what_the_model_says(self) -> None:
+        if not hasattr(self, "store"):
+            return
+        assert self.stored_seqs() == self.queue
+
+    @invariant()
+    def every_event_is_in_exactly_one_place_and_counted(self) -> None:
+        if not hasattr(self, "store"):
+            return
         stats = self.store.stats()
-        assert stats.depth == len(self.model)
-        assert stats.queued_total == self.next_seq
+        drops = stats.drops
+        assert stats.depth == len(self.queue)
+        assert stats.dead_letters == len(self.dead) == self.store.dead_letters.count()
+        assert stats.acked_total == self.fate["acked"]
+        for reason in ("cap_bytes", "cap_events", "ttl", "rejected"):
+            assert drops.get(reason, 0) == self.fate[f"drop:{reason}"], reason
+        put = self.next_seq - 1
+        assert stats.queued_total == put
+        accounted = (
+            len(self.queue)
+            + self.fate["acked"]
+            + sum(n for k, n in self.fate.items() if k.startswith("drop:"))
+            - self.requeued
+        )
+        assert accounted == put, "every event put is in exactly one place"
 
     def teardown(self) -> None:
-        self.store.close()
+        if hasattr(self, "store"):
+            self.store.close()
         shutil.rmtree(self.dir, ignore_errors=True)
 
 
-TestQueueModel = QueueMachine.TestCase
-TestQueueModel.settings = settings(max_examples=40, stateful_step_count=30, deadline=None)
+TestQueueAccounting = QueueAccounting.TestCase
+TestQueueAccounting.settings = settings(max_examples=150, stateful_step_count=40, deadline=None)

@@ -10,18 +10,15 @@ from __future__ import annotations
 
 from phytrace_edge.sim.mock_ros import qos
 from phytrace_edge.sim.mock_ros.clock import Clock, ClockType
+from phytrace_edge.sim.mock_ros.executor import SingleThreadedExecutor
 from phytrace_edge.sim.mock_ros.messages import message_type
 from phytrace_edge.sim.mock_ros.runtime import (
     Context,
     Node,
-    SingleThreadedExecutor,
     SubscriptionEventCallbacks,
     create_node,
     init,
-    ok,
     shutdown,
-    spin,
-    spin_once,
 )
 
 __all__ = [
@@ -34,9 +31,6 @@ __all__ = [
     "create_node",
     "init",
     "message_type",
-    "ok",
     "qos",
     "shutdown",
-    "spin",
-    "spin_once",
 ]

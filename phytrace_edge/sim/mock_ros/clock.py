@@ -10,7 +10,6 @@ from __future__ import annotations
 import enum
 import threading
 import time
-from dataclasses import dataclass
 
 
 class ClockType(enum.IntEnum):
@@ -59,15 +58,6 @@ class VirtualTimeSource:
 TimeSource = RealTimeSource | VirtualTimeSource
 
 
-@dataclass(frozen=True)
-class Duration:
-    nanoseconds: int = 0
-
-    @classmethod
-    def from_seconds(cls, seconds: float) -> Duration:
-        return cls(int(seconds * 1e9))
-
-
 class Time:
     """A point in time of one clock type, like ``rclpy.time.Time``."""
 
@@ -89,9 +79,6 @@ class Time:
 
         sec, nanosec = self.seconds_nanoseconds()
         return TimeMsg(sec=sec, nanosec=nanosec)
-
-    def __sub__(self, other: Time) -> Duration:
-        return Duration(self.nanoseconds - other.nanoseconds)
 
     def __repr__(self) -> str:
         return f"Time(nanoseconds={self.nanoseconds}, clock_type={self.clock_type.name})"

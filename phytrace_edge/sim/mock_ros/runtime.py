@@ -17,12 +17,10 @@ Semantics kept from ROS 2 on DDS, because the bridge's behaviour depends on them
 from __future__ import annotations
 
 import copy
-import functools
-import itertools
 import threading
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from phytrace_edge.sim.mock_ros.clock import (
@@ -83,10 +81,6 @@ def init(args: Any = None, *, context: Context | None = None) -> None:
     _default_context.init()
 
 
-def ok(*, context: Context | None = None) -> bool:
-    return (context or _default_context).ok()
-
-
 def shutdown(*, context: Context | None = None) -> None:
     (context or _default_context).shutdown()
 
@@ -131,15 +125,6 @@ class Publisher:
                 if subscription.matches_topic(self):
                     subscription.offer(self, msg)
             context.condition.notify_all()
-
-    def get_subscription_count(self) -> int:
-        with self.node.context.condition:
-            return sum(
-                1
-                for s in self.node.context.subscriptions
-                if s.matches_topic(self)
-                and incompatible_policy(self.qos_profile, s.qos_profile) is None
-            )
 
 
 class Subscription:
@@ -220,35 +205,8 @@ class Timer:
         self.callback()
 
 
-@dataclass
-class Parameter:
-    name: str
-    value: Any = None
-
-
-class _Logger:
-    def __init__(self, name: str) -> None:
-        import logging
-
-        self._log = logging.getLogger(f"mock_ros.{name}")
-
-    def info(self, msg: str) -> None:
-        self._log.info(msg)
-
-    def warning(self, msg: str) -> None:
-        self._log.warning(msg)
-
-    warn = warning
-
-    def error(self, msg: str) -> None:
-        self._log.error(msg)
-
-    def debug(self, msg: str) -> None:
-        self._log.debug(msg)
-
-
 class Node:
-    """``rclpy.node.Node`` with publishers, subscriptions, timers, parameters, graph."""
+    """``rclpy.node.Node`` with publishers, subscriptions, timers and the graph API."""
 
     def __init__(
         self,
@@ -256,17 +214,11 @@ class Node:
         *,
         namespace: str = "/",
         context: Context | None = None,
-        parameter_overrides: list[Parameter] | None = None,
-        automatically_declare_parameters_from_overrides: bool = False,
     ) -> None:
         self.context = context or _default_context
         if not self.context.ok():
             raise RuntimeError("rclpy.init() has not been called")
         self._name, self._namespace = node_name, namespace
-        self._overrides = {p.name: p.value for p in parameter_overrides or []}
-        self._parameters: dict[str, Parameter] = {}
-        if automatically_declare_parameters_from_overrides:
-            self._parameters = {k: Parameter(k, v) for k, v in self._overrides.items()}
         self.timers: list[Timer] = []
         self.subscriptions: list[Subscription] = []
         self.publishers: list[Publisher] = []
@@ -279,22 +231,8 @@ class Node:
     def get_namespace(self) -> str:
         return self._namespace
 
-    def get_logger(self) -> _Logger:
-        return _Logger(self._name)
-
     def get_clock(self) -> Clock:
         return Clock(clock_type=ClockType.ROS_TIME, source=self.context.time_source)
-
-    def declare_parameter(self, name: str, value: Any = None) -> Parameter:
-        parameter = Parameter(name, self._overrides.get(name, value))
-        self._parameters[name] = parameter
-        return parameter
-
-    def get_parameter(self, name: str) -> Parameter:
-        return self._parameters[name]
-
-    def has_parameter(self, name: str) -> bool:
-        return name in self._parameters
 
     def create_publisher(
         self, msg_type: type[Message], topic: str, qos_profile: QoSProfile | int
@@ -367,17 +305,6 @@ class Node:
             if self in self.context.nodes:
                 self.context.nodes.remove(self)
 
-    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
-        with self.context.condition:
-            endpoints: list[Publisher | Subscription] = [
-                *self.context.publishers,
-                *self.context.subscriptions,
-            ]
-            topics: dict[str, set[str]] = {}
-            for endpoint in endpoints:
-                topics.setdefault(endpoint.topic_name, set()).add(_type_name(endpoint.msg_type))
-        return sorted((name, sorted(types)) for name, types in topics.items())
-
     def get_publishers_info_by_topic(self, topic_name: str) -> list[TopicEndpointInfo]:
         with self.context.condition:
             return [
@@ -391,83 +318,6 @@ class Node:
                 if p.topic_name == topic_name
             ]
 
-    def count_publishers(self, topic_name: str) -> int:
-        return len(self.get_publishers_info_by_topic(topic_name))
-
 
 def create_node(node_name: str, **kwargs: Any) -> Node:
     return Node(node_name, **kwargs)
-
-
-@dataclass
-class SingleThreadedExecutor:
-    """Runs one ready callback per ``spin_once``, oldest work first."""
-
-    context: Context = field(default_factory=default_context)
-    nodes: list[Node] = field(default_factory=list)
-    _turn: itertools.count = field(default_factory=itertools.count)
-
-    def add_node(self, node: Node) -> bool:
-        if node not in self.nodes:
-            self.nodes.append(node)
-        return True
-
-    def remove_node(self, node: Node) -> None:
-        if node in self.nodes:
-            self.nodes.remove(node)
-
-    def spin_once(self, timeout_sec: float | None = None) -> None:
-        source = self.context.time_source
-        deadline = None if timeout_sec is None else source.steady_ns() + int(timeout_sec * 1e9)
-        with self.context.condition:
-            while self.context.ok():
-                work = self._ready_work()
-                if work is not None:
-                    break
-                wake = self._next_timer_ns()
-                if deadline is not None:
-                    wake = deadline if wake is None else min(wake, deadline)
-                if wake is None and source.virtual:
-                    return  # virtual time with nothing scheduled: nothing can ever happen
-                if deadline is not None and source.steady_ns() >= deadline:
-                    return
-                source.wait(self.context.condition, wake)
-            else:
-                return
-        work()
-
-    def spin(self) -> None:
-        while self.context.ok() and self.nodes:
-            self.spin_once(timeout_sec=0.1)
-
-    def _ready_work(self) -> Callable[[], None] | None:
-        """The next callback to run, or None (caller holds the condition)."""
-        for node in self.nodes:
-            for subscription in node.subscriptions:
-                if subscription.pending_events and subscription.event_callbacks.incompatible_qos:
-                    event = subscription.pending_events.pop(0)
-                    callback = subscription.event_callbacks.incompatible_qos
-                    return functools.partial(callback, event)
-            ready = [s for s in node.subscriptions if s.pending]
-            if ready:
-                subscription = ready[next(self._turn) % len(ready)]
-                msg = subscription.pending.popleft()
-                return functools.partial(subscription.callback, msg)
-        for node in self.nodes:
-            for timer in node.timers:
-                if timer.is_ready():
-                    return timer.fire
-        return None
-
-    def _next_timer_ns(self) -> int | None:
-        calls = [t.next_call_ns for n in self.nodes for t in n.timers if not t.cancelled]
-        return min(calls) if calls else None
-
-
-def spin_once(node: Node, *, timeout_sec: float | None = None) -> None:
-    executor = SingleThreadedExecutor(node.context, [node])
-    executor.spin_once(timeout_sec)
-
-
-def spin(node: Node) -> None:
-    SingleThreadedExecutor(node.context, [node]).spin()
