@@ -7,9 +7,6 @@ repr or in JSON, percent-encoded in a URL), so a redaction filter can catch thos
 
 from __future__ import annotations
 
-import json
-from urllib.parse import quote
-
 MASK = "***"
 
 
@@ -44,6 +41,9 @@ class Secret:
 def leak_forms(secret: str) -> list[str]:
     """Every form of ``secret`` worth masking, longest first: as is, as Python's repr
     and JSON escape it, and percent-encoded."""
+    import json  # here: every command imports Secret, few ever redact
+    from urllib.parse import quote
+
     if not secret:
         return []
     forms = {
@@ -56,9 +56,8 @@ def leak_forms(secret: str) -> list[str]:
     return sorted(forms, key=len, reverse=True)
 
 
-def redact(text: str, secrets: list[str]) -> str:
-    """``text`` with every form of every secret replaced by ``***``."""
-    for secret in secrets:
-        for form in leak_forms(secret):
-            text = text.replace(form, MASK)
+def redact(text: str, forms: list[str]) -> str:
+    """``text`` with each of ``forms`` (from ``leak_forms``) replaced by ``***``."""
+    for form in forms:
+        text = text.replace(form, MASK)
     return text

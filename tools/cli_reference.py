@@ -15,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from phytrace_edge.cli import build_parser  # noqa: E402
+from phytrace_edge.cli import COMMANDS, build_parser, command_parser  # noqa: E402
 
 TARGET = ROOT / "docs" / "cli.md"
 WIDTH = 100
@@ -48,7 +48,8 @@ def normalised(text: str) -> str:
 def reference() -> str:
     parser = fixed_width(build_parser())
     parts = [HEADER, "## phytrace-edge\n", "```text", normalised(parser.format_help()), "```\n"]
-    for name, command in subcommands(parser).items():
+    for name in COMMANDS:
+        command = command_parser(name)
         parts += [f"## phytrace-edge {name}\n", "```text"]
         parts += [normalised(fixed_width(command).format_help()), "```\n"]
     return "\n".join(parts)

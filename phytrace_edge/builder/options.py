@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-DEFAULT_SAMPLE_RATE_HZ = 5.0
-DEFAULT_STALE_AFTER_S = 5.0
+from phytrace_edge.builder.defaults import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
 
 
 @dataclass(frozen=True)

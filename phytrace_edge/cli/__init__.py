@@ -9,31 +9,69 @@ traceback. Commands import what they use inside their ``run``, so ``--help`` and
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from collections.abc import Sequence
 
 from phytrace_edge import __version__
-from phytrace_edge.cli import common, config, dead_letters, drain, run, sim, status, stub
+from phytrace_edge.cli import common
 from phytrace_edge.config import ros_parameters, settings_from_environment
 from phytrace_edge.errors import EXIT_INTERRUPTED, EXIT_OK, PhytraceError
-from phytrace_edge.runtime import wiring
 
-COMMANDS = (run, status, drain, config, sim, dead_letters, stub)
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
+
+# command -> its module, imported when used: one run of the CLI needs one of them
+COMMANDS = {
+    name: f"phytrace_edge.cli.{name.replace('-', '_')}"
+    for name in ("run", "status", "drain", "config", "sim", "dead-letters", "stub")
+}
+DESCRIPTION = "PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud."
+HELP_WIDTH = 100
+
+
+def _formatter(prog: str) -> argparse.HelpFormatter:
+    # a width of our own: argparse would import shutil to ask the terminal for one,
+    # which costs the start of every command (status runs every 30 s in a container)
+    return argparse.HelpFormatter(prog, width=HELP_WIDTH)
+
+
+def _configure(parser: argparse.ArgumentParser, command: Any) -> argparse.ArgumentParser:
+    command.configure(parser)
+    parser.set_defaults(handler=command.run, logs=getattr(command, "LOGS", True))
+    if getattr(command, "TAKES_SETTINGS", True):
+        common.add_setting_flags(parser)
+    return parser
+
+
+def command_module(name: str) -> Any:
+    return importlib.import_module(COMMANDS[name])
+
+
+def command_parser(name: str) -> argparse.ArgumentParser:
+    """The parser of one command, as ``phytrace-edge NAME`` (all that one run needs)."""
+    command = command_module(name)
+    parser = argparse.ArgumentParser(
+        prog=f"phytrace-edge {name}", description=command.HELP, formatter_class=_formatter
+    )
+    return _configure(parser, command)
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``phytrace-edge`` with every command (for --help and the docs)."""
     parser = argparse.ArgumentParser(
-        prog="phytrace-edge",
-        description="PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud.",
+        prog="phytrace-edge", description=DESCRIPTION, formatter_class=_formatter
     )
     parser.add_argument("--version", action="version", version=f"phytrace-edge {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for command in COMMANDS:
-        sub = command.add_parser(commands)
-        sub.set_defaults(handler=command.run)
-        if getattr(command, "TAKES_SETTINGS", True):
-            common.add_setting_flags(sub)
+    for name in COMMANDS:
+        command = command_module(name)
+        sub = commands.add_parser(
+            name, help=command.HELP, description=command.HELP, formatter_class=_formatter
+        )
+        _configure(sub, command)
     return parser
 
 
@@ -42,7 +80,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     # everything after --ros-args is for ROS: parameters here, the rest for rclpy
     split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
-    args = build_parser().parse_args(argv[:split])
+    if argv and argv[0] in COMMANDS:  # the usual case: build only what this run uses
+        args = command_parser(argv[0]).parse_args(argv[1:split])
+    else:  # --help, --version or a mistake: the full parser answers (and exits)
+        args = build_parser().parse_args(argv[:split])
     args.ros_args = argv[split + 1 :]
     try:
         loaded = settings_from_environment(
@@ -51,7 +92,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             config_path=getattr(args, "config", None),
             ros_params=ros_parameters(args.ros_args),
         )
-        wiring.configure_logging(loaded.settings)
+        if args.logs:
+            from phytrace_edge.runtime.wiring import configure_logging
+
+            configure_logging(loaded.settings)
         code: int = args.handler(args, loaded)
         sys.stdout.flush()  # here, so that a reader gone away is handled below
         return code

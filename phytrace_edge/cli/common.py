@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
 
 from phytrace_edge.config import setting_infos
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import format_bytes
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
 
 SETTING_PREFIX = "setting_"
 # flags that keep another name working: DESIGN.md and the docs say --input
@@ -57,6 +60,7 @@ def error(message: str) -> None:
 
 
 def print_json(document: Any) -> None:
-    import orjson
+    """``document`` as indented JSON (stdlib json: ``status`` starts faster without orjson)."""
+    import json
 
-    sys.stdout.write(orjson.dumps(document, option=orjson.OPT_INDENT_2).decode() + "\n")
+    sys.stdout.write(json.dumps(document, indent=2, ensure_ascii=False) + "\n")

@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from phytrace_edge.cli.common import print_json, shown_value
 from phytrace_edge.config import LoadedSettings, setting_infos
 
+LOGS = False
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "config", help="print the effective settings and their sources"
-    )
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    pass
+
+
+NAME = "config"
+HELP = "print the effective settings and their sources"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

@@ -4,24 +4,26 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
 
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, ConfigError
 from phytrace_edge.runtime import wiring
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from phytrace_edge.config import LoadedSettings
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "dead-letters", help="list, export, requeue or purge events PhyCloud rejected"
-    )
+
+NAME = "dead-letters"
+HELP = "list, export, requeue or purge events PhyCloud rejected"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", choices=["list", "export", "requeue", "purge"])
     parser.add_argument("ids", nargs="*", type=int, help="dead letter ids (default: all)")
     parser.add_argument("--limit", type=int, default=100, help="list at most this many")
     parser.add_argument("--output", "-o", default="-", help="export to this file (- = stdout)")
     parser.add_argument("--older-than-days", type=float, help="purge only those older")
     parser.add_argument("--all", action="store_true", help="purge all")
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

@@ -3,27 +3,30 @@
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import time
-from typing import Any
 
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from phytrace_edge.config import LoadedSettings
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "drain", help="send the whole backlog now, with a progress bar"
-    )
+
+NAME = "drain"
+HELP = "send the whole backlog now, with a progress bar"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timeout", type=float, help="give up after this many seconds")
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Send the whole backlog now; exit 0 only when the queue is empty at the end."""
+    import signal
+
     from tqdm import tqdm
 
     from phytrace_edge.ship.sender import Sender

@@ -3,40 +3,42 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import os
-import signal
-import threading
 import time
-from typing import Any
 
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, StageFailedError
 from phytrace_edge.runtime import wiring
 
-log = logging.getLogger("phytrace_edge")
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from phytrace_edge.config import LoadedSettings
 
 WATCHDOG_IDLE_S = 5.0
 POLL_S = 0.2
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "run", help="run the bridge (ingest, queue, ship) until stopped"
-    )
+NAME = "run"
+HELP = "run the bridge (ingest, queue, ship) until stopped"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--rate",
         dest="setting_replay_rate",
         metavar="VALUE",
         help="bag replay speed, same as --replay-rate",
     )
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Run the bridge until SIGTERM or SIGINT; a second signal exits at once."""
+    import logging
+    import signal
+    import threading
+
     from phytrace_edge.runtime.sd_notify import SystemdNotifier
 
+    log = logging.getLogger("phytrace_edge")
     stop = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from phytrace_edge.cli.common import print_json
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from phytrace_edge.config import LoadedSettings
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "sim", help="run the simulated delivery robot through the bridge"
-    )
+
+NAME = "sim"
+HELP = "run the simulated delivery robot through the bridge"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--ticks", type=int, default=100, help="robot cycles at 10 Hz (default 100)"
     )
@@ -27,7 +30,6 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     parser.add_argument(
         "--storage", choices=["mcap", "sqlite3"], default="mcap", help="storage of the recorded bag"
     )
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

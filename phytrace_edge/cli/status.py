@@ -5,22 +5,28 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
 
 from phytrace_edge.cli.common import error, print_json
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING
 from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
 
+LOGS = False  # status prints, it does not log: the health check starts it every 30 s
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "status", help="show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running"
-    )
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
+
+    from phytrace_edge.config import LoadedSettings
+
+
+NAME = "status"
+HELP = "show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON (a stable interface)")
     parser.add_argument("--quiet", "-q", action="store_true", help="print nothing: exit code only")
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

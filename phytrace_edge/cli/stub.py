@@ -3,18 +3,21 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
-from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, ConfigError
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from phytrace_edge.config import LoadedSettings
 
 TAKES_SETTINGS = False
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = commands.add_parser(
-        "stub", help="run the PhyCloud dev stub (HTTP server)"
-    )
+NAME = "stub"
+HELP = "run the PhyCloud dev stub (HTTP server)"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on")
     parser.add_argument("--port", type=int, default=8000, help="port (0 = any free port)")
     parser.add_argument("--db", default="phycloud-stub.db", help="the stub's SQLite file")
@@ -40,7 +43,6 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, help="seed of the fault injection RNG")
     parser.add_argument("--tls-cert", help="serve https with this certificate (PEM)")
     parser.add_argument("--tls-key", help="the certificate's private key (PEM)")
-    return parser
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

@@ -10,12 +10,12 @@ from phytrace_edge.config.loading import (
     settings_from_environment,
 )
 from phytrace_edge.config.ros_params import ros_parameters
-from phytrace_edge.config.settings import SOURCE_TYPES, SettingInfo, Settings, setting_infos
+from phytrace_edge.config.settings import SOURCE_TYPES, Setting, Settings, setting_infos
 
 __all__ = [
     "SOURCE_TYPES",
     "LoadedSettings",
-    "SettingInfo",
+    "Setting",
     "Settings",
     "default_state_dir",
     "load_settings",

@@ -9,26 +9,37 @@ files pass ``${FLEET_ID}`` through as an empty string when the operator did not 
 
 from __future__ import annotations
 
+import os
+import stat
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Any
 
-from phytrace_edge.config.settings import SettingInfo, Settings, setting_infos
+from phytrace_edge.config.settings import Setting, Settings, setting_infos
 from phytrace_edge.errors import ConfigError
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
 
-@dataclass(frozen=True)
+CONFIG_FILE_MAX_BYTES = 1024 * 1024
+SHOWN_MAX_CHARS = 60
+
+
 class LoadedSettings:
-    """Settings plus where each value came from (``default``, ``env:NAME``, ...)."""
+    """Settings plus where each value came from (``default``, ``env NAME``, ...)."""
 
-    settings: Settings
-    origins: dict[str, str]
+    __slots__ = ("origins", "settings")
+
+    def __init__(self, settings: Settings, origins: dict[str, str]) -> None:
+        self.settings, self.origins = settings, origins
 
 
-def _shown(info: SettingInfo, raw: Any) -> str:
-    return "'***'" if info.key == "phycloud_api_key" else repr(raw)
+def _shown(info: Setting, raw: Any) -> str:
+    """A value as an error message quotes it: the API key never, and nothing long."""
+    if info.key == "phycloud_api_key":
+        return "'***'"
+    text = ascii(raw)
+    return text if len(text) <= SHOWN_MAX_CHARS else text[:SHOWN_MAX_CHARS] + "...'"
 
 
 def load_settings(
@@ -71,12 +82,12 @@ def load_settings(
             f"({settings.retry_min_s:g})"
         )
     if settings.queue_path is None:
-        settings = replace(settings, queue_path=str(default_state_dir(env) / "queue.db"))
+        settings = settings.replace(queue_path=os.path.join(default_state_dir(env), "queue.db"))
     return LoadedSettings(settings, origins)
 
 
 def _pick(
-    info: SettingInfo,
+    info: Setting,
     flags: Mapping[str, Any],
     env: Mapping[str, str],
     config_file: Mapping[str, Any],
@@ -103,17 +114,25 @@ def read_config_file(path: str) -> dict[str, Any]:
     else:  # pragma: no cover - exercised on 3.10 only
         import tomli as tomllib
     try:
-        with Path(path).open("rb") as handle:
-            return tomllib.load(handle)
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            raise ConfigError(f"config file {path}: not a regular file")
+        with open(path, "rb") as handle:
+            data = handle.read(CONFIG_FILE_MAX_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"config file {path}: not found") from None
     except OSError as exc:
         raise ConfigError(f"config file {path}: cannot read ({exc.strerror})") from None
+    if len(data) > CONFIG_FILE_MAX_BYTES:
+        raise ConfigError(f"config file {path}: larger than 1 MiB - is it the right file?")
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"config file {path}: not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path}: not valid TOML ({exc})") from None
 
 
-def default_state_dir(env: Mapping[str, str]) -> Path:
+def default_state_dir(env: Mapping[str, str]) -> str:
     """Where the queue lives when QUEUE_PATH is not set.
 
     systemd's ``StateDirectory=`` sets ``$STATE_DIRECTORY`` (a colon-separated list);
@@ -121,11 +140,12 @@ def default_state_dir(env: Mapping[str, str]) -> Path:
     otherwise the per-user XDG state directory.
     """
     if env.get("STATE_DIRECTORY"):
-        return Path(env["STATE_DIRECTORY"].split(":")[0])
+        return env["STATE_DIRECTORY"].split(":")[0]
     if env.get("PHYTRACE_STATE_DIR"):
-        return Path(env["PHYTRACE_STATE_DIR"])
-    base = env.get("XDG_STATE_HOME") or str(Path(env.get("HOME", "~")) / ".local" / "state")
-    return Path(base).expanduser() / "phytrace-edge"
+        return env["PHYTRACE_STATE_DIR"]
+    home = env.get("HOME", "~")
+    base = env.get("XDG_STATE_HOME") or os.path.join(home, ".local", "state")
+    return os.path.join(os.path.expanduser(base), "phytrace-edge")
 
 
 def settings_from_environment(

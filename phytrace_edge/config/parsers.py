@@ -1,44 +1,92 @@
 """Value parsers of the settings: each takes the raw value (a string from the
 environment or a flag, or a TOML or ROS parameter value) and returns the typed value,
-or raises ValueError whose text says what is allowed."""
+or raises ValueError whose text says what is allowed.
+
+Hostile values are expected: numbers are ASCII digits only (``int("٣")`` is 3 in
+Python), whole numbers are never floats that get cut (``batch_size = 1.9``), sizes are
+bounded before they are computed, and nothing here reads more than a little of a file.
+"""
 
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from collections.abc import Callable
-from pathlib import Path
-from typing import Any
-from urllib.parse import urlsplit
 
-from phytrace_edge.ingest.qos import QosChoice
 from phytrace_edge.ingest.topics import TOPIC_NAMES
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import format_bytes
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
+
+    from phytrace_edge.ingest.qos import QosChoice
+
 KNOWN_TOPICS = TOPIC_NAMES
+MAX_TEXT_CHARS = 4096  # no setting needs more; a longer value is a mistake
+PEM_MARKER = b"-----BEGIN CERTIFICATE-----"
+PEM_MAX_BYTES = 16 * 1024 * 1024
+# Patterns as text, matched with ``_matches``: re compiles (and caches) one only when a
+# setting that needs it is given, not at every start of every command.
+_INTEGER = r"[+-]?[0-9]{1,30}"
+_DECIMAL = r"[+-]?([0-9]{1,30}(\.[0-9]{0,30})?|\.[0-9]{1,30})([eE][+-]?[0-9]{1,3})?"
+_SIZE = r"\s*([0-9]{1,20}(?:\.[0-9]{1,10})?)\s*([kmgtKMGT]?[iI]?[bB]?)\s*"
+_HOST_LABEL = r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)"
+_IDENTIFIER = r"[A-Za-z0-9][A-Za-z0-9._:@-]{0,127}"
+_NAMESPACE = r"(/[A-Za-z][A-Za-z0-9_]*)+"
+_TOPIC = r"(/[A-Za-z0-9_~{}]+)+"
+_API_KEY = r"[\x21-\x7e]{1,4096}"  # printable ASCII, no spaces
 
 
-def _number(raw: Any, kind: type) -> Any:
+def _matches(pattern: str, text: str) -> re.Match[str] | None:
+    """``pattern`` matched against all of ``text``, ASCII only (``\\d`` is not ``٣``)."""
+    return re.fullmatch(pattern, text, re.ASCII)
+
+
+def _text(raw: Any) -> str:
+    """A value given as text (env, flag, ROS parameter) or a TOML string."""
+    if not isinstance(raw, str):
+        raise ValueError
+    if len(raw) > MAX_TEXT_CHARS:
+        raise ValueError
+    return raw.strip()
+
+
+def _float(raw: Any) -> float:
     if isinstance(raw, bool):
         raise ValueError
-    try:
-        value = kind(raw)
-    except (TypeError, ValueError) as exc:
-        raise ValueError from exc
-    if kind is float and not math.isfinite(value):
+    if isinstance(raw, (int, float)) or _matches(_DECIMAL, _text(raw)):
+        value = float(raw)
+    else:
+        raise ValueError
+    if not math.isfinite(value):
         raise ValueError
     return value
 
 
+def _int(raw: Any) -> int:
+    if isinstance(raw, (bool, float)):  # 1.9 must not become 1
+        raise ValueError
+    if isinstance(raw, int):
+        return raw
+    text = _text(raw)
+    if not _matches(_INTEGER, text):
+        raise ValueError
+    return int(text)
+
+
 def positive_float(upper: float) -> Callable[[Any], float]:
     def parse(raw: Any) -> float:
+        allowed = f"a number > 0 and <= {upper:g}"
         try:
-            value = _number(raw, float)
+            value = _float(raw)
         except ValueError:
-            value = -1.0
+            raise ValueError(allowed) from None
         if not 0 < value <= upper:
-            raise ValueError(f"a number > 0 and <= {upper:g}")
+            raise ValueError(allowed)
         return value
 
     return parse
@@ -46,12 +94,13 @@ def positive_float(upper: float) -> Callable[[Any], float]:
 
 def non_negative_float(upper: float) -> Callable[[Any], float]:
     def parse(raw: Any) -> float:
+        allowed = f"a number from 0 to {upper:g}"
         try:
-            value = _number(raw, float)
+            value = _float(raw)
         except ValueError:
-            value = -1.0
+            raise ValueError(allowed) from None
         if not 0 <= value <= upper:
-            raise ValueError(f"a number from 0 to {upper:g}")
+            raise ValueError(allowed)
         return value
 
     return parse
@@ -59,12 +108,13 @@ def non_negative_float(upper: float) -> Callable[[Any], float]:
 
 def int_between(lower: int, upper: int) -> Callable[[Any], int]:
     def parse(raw: Any) -> int:
+        allowed = f"a whole number from {lower} to {upper}"
         try:
-            value = _number(raw, int)
+            value = _int(raw)
         except ValueError:
-            value = lower - 1
+            raise ValueError(allowed) from None
         if not lower <= value <= upper:
-            raise ValueError(f"a whole number from {lower} to {upper}")
+            raise ValueError(allowed)
         return value
 
     return parse
@@ -77,37 +127,47 @@ def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
         try:
             return parse(raw)
         except ValueError as exc:
-            raise ValueError(f"{exc} (or none)") from exc
+            raise ValueError(f"{exc} (or none)") from None
 
     return parse_optional
 
 
 def one_of(*choices: str) -> Callable[[Any], str]:
     def parse(raw: Any) -> str:
-        value = str(raw).strip().lower()
+        allowed = "one of " + ", ".join(choices)
+        try:
+            value = _text(raw).lower()
+        except ValueError:
+            raise ValueError(allowed) from None
         if value not in choices:
-            raise ValueError("one of " + ", ".join(choices))
+            raise ValueError(allowed)
         return value
 
     return parse
 
 
-_SIZE = re.compile(r"^\s*(\d+(?:\.\d+)?)\s*([kmgt]?i?b?)?\s*$", re.IGNORECASE)
+def log_level(raw: Any) -> str:
+    return one_of("debug", "info", "warning", "error")(raw).upper()
 
 
-def byte_size(lower: int) -> Callable[[Any], int]:
+def byte_size(lower: int, upper: int = 2**50) -> Callable[[Any], int]:
     """Bytes as a number or with a unit: ``1048576``, ``512MiB``, ``1GiB``, ``1.5GB``."""
 
     def parse(raw: Any) -> int:
-        allowed = f"a size of at least {format_bytes(lower)}, like 1048576, 512MiB or 1GiB"
-        match = _SIZE.match(str(raw)) if not isinstance(raw, bool) else None
+        allowed = (
+            f"a size from {format_bytes(lower)} to {format_bytes(upper)}, "
+            "like 1048576, 512MiB or 1GiB"
+        )
+        if isinstance(raw, int) and not isinstance(raw, bool):
+            raw = str(raw)
+        match = _matches(_SIZE, raw) if isinstance(raw, str) and len(raw) <= 64 else None
         if not match:
             raise ValueError(allowed)
-        unit = (match.group(2) or "").lower()
+        unit = match.group(2).lower()
         base = 1024 if "i" in unit else 1000
         scale = base ** "bkmgt".index(unit[0]) if unit and unit[0] != "b" else 1
         value = int(float(match.group(1)) * scale)
-        if value < lower:
+        if not lower <= value <= upper:
             raise ValueError(allowed)
         return value
 
@@ -115,67 +175,130 @@ def byte_size(lower: int) -> Callable[[Any], int]:
 
 
 def http_url(raw: Any) -> str:
-    value = str(raw).strip().rstrip("/")
-    parts = urlsplit(value)
-    if parts.scheme not in ("http", "https") or not parts.hostname:
-        raise ValueError("an http:// or https:// URL with a host, like https://api.example.com/v1")
+    """An http(s) URL with a valid host and port; the path is kept, a trailing / not."""
+    from urllib.parse import urlsplit  # only when the endpoint is set (status starts fast)
+
+    allowed = "an http:// or https:// URL with a host, like https://api.example.com/v1"
+    try:
+        value = _text(raw).rstrip("/")
+        parts = urlsplit(value)
+        port = parts.port  # raises ValueError for a port that is not a number 0-65535
+    except ValueError:
+        raise ValueError(allowed) from None
+    host = parts.hostname or ""
+    if parts.scheme not in ("http", "https") or not _valid_host(host) or port == 0:
+        raise ValueError(allowed)
+    if any(c.isspace() or not c.isprintable() for c in value):
+        raise ValueError(allowed)
     return value
 
 
+def _valid_host(host: str) -> bool:
+    if ":" in host:  # an IPv6 literal (urlsplit took the brackets away)
+        import ipaddress
+
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            return False
+        return True
+    labels = host.rstrip(".").split(".")
+    return bool(host) and all(_matches(_HOST_LABEL, label) for label in labels)
+
+
 def identifier(raw: Any) -> str:
-    value = str(raw).strip()
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._:@-]{0,127}", value):
-        raise ValueError("1-128 characters of letters, digits and . _ : @ - (starting alnum)")
+    allowed = "1-128 characters of letters, digits and . _ : @ - (starting alnum)"
+    try:
+        value = _text(raw)
+    except ValueError:
+        raise ValueError(allowed) from None
+    if not _matches(_IDENTIFIER, value):
+        raise ValueError(allowed)
     return value
 
 
 def bridge_input(raw: Any) -> str:
-    value = str(raw).strip()
+    allowed = "ros, dds, sim or bag:PATH"
+    try:
+        value = _text(raw)
+    except ValueError:
+        raise ValueError(allowed) from None
     if value in ("ros", "dds", "sim") or (value.startswith("bag:") and len(value) > 4):
         return value
-    raise ValueError("ros, dds, sim or bag:PATH")
+    raise ValueError(allowed)
 
 
-def existing_file(raw: Any) -> str:
-    path = Path(str(raw)).expanduser()
-    if not path.is_file():
-        raise ValueError("the path of an existing file")
-    return str(path)
+def ca_file(raw: Any) -> str:
+    """A PEM file of CA certificates: a readable regular file with a certificate in it
+    (a wrong file fails here, not at the first TLS handshake)."""
+    allowed = "the path of a readable PEM file of CA certificates"
+    try:
+        path = os.path.expanduser(_text(raw))
+        if not stat.S_ISREG(os.stat(path).st_mode) or os.stat(path).st_size > PEM_MAX_BYTES:
+            raise ValueError(allowed)
+        with open(path, "rb") as handle:
+            if PEM_MARKER not in handle.read(PEM_MAX_BYTES):
+                raise ValueError(allowed)
+    except (OSError, ValueError):
+        raise ValueError(allowed) from None
+    return path
 
 
 def path_value(raw: Any) -> str:
-    value = str(raw).strip()
-    if not value:
-        raise ValueError("a file path")
-    return str(Path(value).expanduser())
+    allowed = "a file path"
+    try:
+        value = _text(raw)
+    except ValueError:
+        raise ValueError(allowed) from None
+    if not value or "\x00" in value:
+        raise ValueError(allowed)
+    return os.path.expanduser(value)
 
 
 def boolean(raw: Any) -> bool:
     if isinstance(raw, bool):
         return raw
-    value = str(raw).strip().lower()
+    allowed = "true or false"
+    try:
+        value = _text(raw).lower()
+    except ValueError:
+        raise ValueError(allowed) from None
     if value in ("1", "true", "yes", "on"):
         return True
     if value in ("0", "false", "no", "off"):
         return False
-    raise ValueError("true or false")
+    raise ValueError(allowed)
 
 
-def _topic_list(raw: Any) -> list[str]:
-    items = raw if isinstance(raw, list) else str(raw).split(",")
-    return [str(item).strip() for item in items if str(item).strip()]
+def _topic_list(raw: Any, allowed: str) -> list[str]:
+    if isinstance(raw, list):
+        items = raw
+    else:
+        try:
+            items = _text(raw).split(",")
+        except ValueError:
+            raise ValueError(allowed) from None
+    if not all(isinstance(item, str) for item in items):
+        raise ValueError(allowed)
+    return [item.strip() for item in items if item.strip()]
+
+
+def _pairs(raw: Any, allowed: str) -> list[tuple[str, str]]:
+    if isinstance(raw, dict):
+        pairs = list(raw.items())
+    else:
+        pairs = [tuple(p.split("=", 1)) for p in _topic_list(raw, allowed)]  # type: ignore[misc]
+    if not all(len(pair) == 2 and all(isinstance(x, str) for x in pair) for pair in pairs):
+        raise ValueError(allowed)
+    return [(a.strip(), b.strip()) for a, b in pairs]
 
 
 def topic_remap(raw: Any) -> dict[str, str]:
     """``/odom=/wheel/odom,/scan=/front/scan`` (or a TOML table) -> {topic: remapped}."""
     allowed = "topic=name pairs separated by commas, like /odom=/wheel/odom, for known topics"
-    pairs = raw.items() if isinstance(raw, dict) else (p.split("=", 1) for p in _topic_list(raw))
-    remap: dict[str, str] = {}
-    for pair in pairs:
-        if len(pair) != 2:
-            raise ValueError(allowed)
-        source, target = (str(part).strip() for part in pair)
-        if source not in KNOWN_TOPICS or not target.startswith("/"):
+    remap = {}
+    for source, target in _pairs(raw, allowed):
+        if source not in KNOWN_TOPICS or not _matches(_TOPIC, target):
             raise ValueError(allowed)
         remap[source] = target
     return remap
@@ -183,16 +306,14 @@ def topic_remap(raw: Any) -> dict[str, str]:
 
 def topic_qos(raw: Any) -> dict[str, QosChoice]:
     """``/scan=best_effort,/goal_pose=reliable:transient_local`` -> per-topic QoS."""
+    from phytrace_edge.ingest.qos import QosChoice
+
     allowed = (
         "topic=reliability[:durability] pairs for known topics, reliability "
         "reliable or best_effort, durability volatile or transient_local"
     )
-    pairs = raw.items() if isinstance(raw, dict) else (p.split("=", 1) for p in _topic_list(raw))
     choices = {}
-    for pair in pairs:
-        if len(pair) != 2:
-            raise ValueError(allowed)
-        topic, text = (str(part).strip() for part in pair)
+    for topic, text in _pairs(raw, allowed):
         reliability, _, durability = text.partition(":")
         if (
             topic not in KNOWN_TOPICS
@@ -205,18 +326,33 @@ def topic_qos(raw: Any) -> dict[str, QosChoice]:
 
 
 def namespace(raw: Any) -> str:
-    value = str(raw).strip().rstrip("/")
-    if not re.fullmatch(r"(/[A-Za-z][A-Za-z0-9_]*)+", value):
-        raise ValueError("a ROS namespace like /robot1")
+    allowed = "a ROS namespace like /robot1"
+    try:
+        value = _text(raw).rstrip("/")
+    except ValueError:
+        raise ValueError(allowed) from None
+    if not _matches(_NAMESPACE, value):
+        raise ValueError(allowed)
     return value
 
 
 def topic_set(raw: Any) -> frozenset[str]:
-    topics = _topic_list(raw)
+    allowed = "known topics separated by commas: " + ",".join(KNOWN_TOPICS)
+    topics = _topic_list(raw, allowed)
     if any(topic not in KNOWN_TOPICS for topic in topics):
-        raise ValueError("known topics separated by commas: " + ",".join(KNOWN_TOPICS))
+        raise ValueError(allowed)
     return frozenset(topics)
 
 
 def secret(raw: Any) -> Secret:
-    return raw if isinstance(raw, Secret) else Secret(str(raw).strip())
+    """The API key: printable ASCII without spaces (a header value that cannot break
+    the request, or leak through an error about a malformed header)."""
+    if isinstance(raw, Secret):
+        return raw
+    allowed = "printable ASCII without spaces or control characters, at most 4096 characters"
+    if not isinstance(raw, str) or len(raw) > MAX_TEXT_CHARS:
+        raise ValueError(allowed)
+    value = raw.strip("\r\n\t ")
+    if value and not _matches(_API_KEY, value):
+        raise ValueError(allowed)
+    return Secret(value)

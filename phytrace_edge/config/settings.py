@@ -4,26 +4,28 @@ Naming: the environment variable is the upper-case name (``SAMPLE_RATE_HZ``), th
 key and ROS parameter the lower-case name (``sample_rate_hz``) and the flag its dashed
 form (``--sample-rate-hz``). The reference guide's aliases (``ROBOT_ID``,
 ``ROBOT_TYPE``) keep working; the primary name wins when both are set. Defaults of a
-stage's settings are the stage's own constants; the rest (logging, health, metrics,
-shutdown) are the runtime's and live here.
+stage's settings are the stage's own constants (its ``defaults.py``); the rest
+(logging, health, metrics, shutdown) are the runtime's and live here.
+
+This package is on the start-up path of every command: stdlib only, and no
+``dataclasses``, ``typing`` or ``pathlib`` at import (tests/unit/test_startup.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import MISSING, dataclass, field, fields
-from typing import Any
 
-from phytrace_edge.builder.options import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
+from phytrace_edge.builder.defaults import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
 from phytrace_edge.config.parsers import (
     KNOWN_TOPICS,
     boolean,
     bridge_input,
     byte_size,
-    existing_file,
+    ca_file,
     http_url,
     identifier,
     int_between,
+    log_level,
     namespace,
     non_negative_float,
     one_of,
@@ -35,25 +37,66 @@ from phytrace_edge.config.parsers import (
     topic_remap,
     topic_set,
 )
-from phytrace_edge.ingest.qos import QosChoice
-from phytrace_edge.ingest.sources.base import DEFAULT_REPLAY_RATE
-from phytrace_edge.queue import options as queue
+from phytrace_edge.ingest.defaults import DEFAULT_REPLAY_RATE
+from phytrace_edge.queue import defaults as queue
 from phytrace_edge.redact import Secret
-from phytrace_edge.ship import options as ship
+from phytrace_edge.ship import defaults as ship
 from phytrace_edge.units import KIB, MIB
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
+
+    from phytrace_edge.ingest.qos import QosChoice
 
 SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
 DEFAULT_SHUTDOWN_GRACE_S = 5.0
 
 
+class Setting:
+    """One setting: its default, its parser (which is its validation rule), its doc
+    line and the environment variables that are its aliases. On a ``Settings`` object
+    it reads that object's value (a descriptor)."""
+
+    __slots__ = ("aliases", "default", "doc", "key", "parse")
+
+    def __init__(
+        self, default: Any, parse: Callable[[Any], Any], doc: str, aliases: tuple[str, ...]
+    ) -> None:
+        self.default, self.parse, self.doc, self.aliases = default, parse, doc, aliases
+        self.key = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.key = name
+
+    def __get__(self, settings: Settings | None, owner: type | None = None) -> Any:
+        return self if settings is None else settings._values[self.key]
+
+    @property
+    def env(self) -> str:
+        return self.key.upper()
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.key.replace("_", "-")
+
+
 def setting(default: Any, parse: Callable[[Any], Any], doc: str, *aliases: str) -> Any:
-    """Declare one setting: its default, its parser/validator, its doc line, env aliases."""
-    return field(default=default, metadata={"parse": parse, "doc": doc, "aliases": aliases})
+    """Declare one setting of ``Settings`` (typed as its value, for the type checker)."""
+    return Setting(default, parse, doc, aliases)
 
 
-@dataclass(frozen=True)
 class Settings:
-    """The effective configuration, validated once at start."""
+    """The effective configuration, validated once at start; read-only.
+
+    Each attribute is a ``Setting``: one name, one default, one rule, one doc line. A
+    plain class rather than a dataclass, because every command (the health check's
+    ``status`` too) loads it at start, and ``dataclasses`` alone costs more than the
+    rest of ``status`` (docs/benchmarks.md).
+    """
+
+    __slots__ = ("_values",)
+    _values: dict[str, Any]
 
     phycloud_endpoint: str = setting(
         ship.DEFAULT_ENDPOINT, http_url, "PhyCloud ingestion API base URL"
@@ -112,7 +155,7 @@ class Settings:
     shutdown_grace_s: float = setting(
         DEFAULT_SHUTDOWN_GRACE_S, positive_float(600), "time to flush at SIGTERM"
     )
-    ca_bundle: str | None = setting(None, optional(existing_file), "extra CA file for TLS")
+    ca_bundle: str | None = setting(None, optional(ca_file), "extra CA file for TLS")
     upload_max_bps: int | None = setting(
         None, optional(int_between(1, 10**12)), "upload bandwidth cap, bytes/s"
     )
@@ -142,11 +185,7 @@ class Settings:
     queue_warn_fraction: float = setting(
         0.8, positive_float(1.0), "status: unhealthy above this fraction of the byte cap"
     )
-    log_level: str = setting(
-        "INFO",
-        lambda raw: one_of("debug", "info", "warning", "error")(raw).upper(),
-        "log threshold",
-    )
+    log_level: str = setting("INFO", log_level, "log threshold")
     log_format: str = setting("text", one_of("text", "json"), "log line format")
 
     @property
@@ -157,34 +196,35 @@ class Settings:
         prefix = self.topic_namespace or ""
         return {t: remap.get(t, prefix + t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
 
+    def __init__(self, **values: Any) -> None:
+        unknown = set(values) - set(_SETTINGS)
+        if unknown:
+            raise TypeError(f"unknown settings: {sorted(unknown)}")
+        merged = {key: values.get(key, s.default) for key, s in _SETTINGS.items()}
+        object.__setattr__(self, "_values", merged)
 
-@dataclass(frozen=True)
-class SettingInfo:
-    """What the docs and ``phytrace-edge config`` say about one setting."""
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError("Settings are read-only; use replace()")
 
-    key: str
-    env: str
-    aliases: tuple[str, ...]
-    flag: str
-    default: Any
-    doc: str
-    parse: Callable[[Any], Any]
+    def replace(self, **changes: Any) -> Settings:
+        """A copy with ``changes``."""
+        return Settings(**{**self._values, **changes})
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Settings) and other._values == self._values
+
+    def __hash__(self) -> int:
+        return hash(tuple(sorted((k, repr(v)) for k, v in self._values.items())))
+
+    def __repr__(self) -> str:
+        return "Settings(" + ", ".join(f"{k}={v!r}" for k, v in self._values.items()) + ")"
 
 
-def setting_infos() -> list[SettingInfo]:
+_SETTINGS: dict[str, Setting] = {
+    name: value for name, value in vars(Settings).items() if isinstance(value, Setting)
+}
+
+
+def setting_infos() -> list[Setting]:
     """Every setting, in declaration order."""
-    infos = []
-    for f in fields(Settings):
-        default = f.default if f.default is not MISSING else None
-        infos.append(
-            SettingInfo(
-                key=f.name,
-                env=f.name.upper(),
-                aliases=f.metadata["aliases"],
-                flag="--" + f.name.replace("_", "-"),
-                default=default,
-                doc=f.metadata["doc"],
-                parse=f.metadata["parse"],
-            )
-        )
-    return infos
+    return list(_SETTINGS.values())

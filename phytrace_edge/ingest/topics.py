@@ -13,22 +13,34 @@ Two flags say how a topic's messages are treated:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 
-
-@dataclass(frozen=True)
 class TopicSpec:
     """One row of the topic table. ``handler`` names the function in
-    ``ingest.handlers`` that reads the topic's messages (this table stays importable
-    without the handlers, for the settings and ``status``)."""
+    ``ingest.handlers`` that reads the topic's messages: the settings read this table
+    at every start, so it imports nothing (not the handlers, not ``dataclasses``)."""
 
-    name: str
-    type_name: str
-    handler: str
-    domains: tuple[str, ...]
-    every_message: bool = False
-    latched: bool = False
-    also_types: tuple[str, ...] = ()  # other types the handler reads on this topic
+    __slots__ = (
+        "also_types",
+        "domains",
+        "every_message",
+        "handler",
+        "latched",
+        "name",
+        "type_name",
+    )
+
+    def __init__(
+        self,
+        name: str,
+        type_name: str,
+        handler: str,
+        domains: tuple[str, ...],
+        every_message: bool = False,
+        latched: bool = False,
+        also_types: tuple[str, ...] = (),  # other types the handler reads on this topic
+    ) -> None:
+        self.name, self.type_name, self.handler, self.domains = name, type_name, handler, domains
+        self.every_message, self.latched, self.also_types = every_message, latched, also_types
 
     @property
     def type_names(self) -> tuple[str, ...]:

@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from phytrace_edge.queue.recovery import queue_error
+from phytrace_edge.queue.sqlite_errors import queue_error
 
 
 class Database:

@@ -4,49 +4,72 @@ writing: the ``QueueStats`` that ``status``, the metrics and the heartbeat show.
 ``read_stats(path)`` opens the file read-only from any process (``status`` while the
 service runs, or after it stopped); ``QueueStore.stats()`` reads the same through the
 store's own connection. Both go through ``stats_from``, so they cannot disagree.
+
+On the start-up path of ``status`` (the container's health check runs it every 30 s):
+stdlib only, and no ``dataclasses``, ``typing``, ``logging`` or ``pathlib`` at import.
 """
 
 from __future__ import annotations
 
-import contextlib
+import json
+import os
 import sqlite3
 import stat
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
-
-import orjson
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.recovery import queue_error
+from phytrace_edge.queue.sqlite_errors import queue_error
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from typing import Any
 
 READ_TIMEOUT_S = 5.0
 
 
-@dataclass(frozen=True)
 class ServiceState:
     """The running service's last heartbeat (``service_state.py`` writes it)."""
 
-    heartbeat_at: float
-    running: bool
-    document: dict[str, Any]
+    __slots__ = ("document", "heartbeat_at", "running")
+
+    def __init__(self, heartbeat_at: float, running: bool, document: dict[str, Any]) -> None:
+        self.heartbeat_at, self.running, self.document = heartbeat_at, running, document
 
 
-@dataclass(frozen=True)
 class QueueStats:
     """The queue's counters and oldest/newest events, its files' size, and the service's
-    last heartbeat (None when no service ever ran on this queue)."""
+    last heartbeat (None when no service ever ran on this queue). ``extra_drops`` are
+    drops counted in memory and not yet written (the disk was full)."""
 
-    path: str
-    counters: dict[str, int]
-    oldest_queued_at: float | None
-    newest_queued_at: float | None
-    file_bytes: int
-    quarantined: str | None
-    leased: int
-    service: ServiceState | None = None
-    max_bytes: int = 0
-    extra_drops: dict[str, int] = field(default_factory=dict)
+    __slots__ = (
+        "counters",
+        "extra_drops",
+        "file_bytes",
+        "leased",
+        "max_bytes",
+        "newest_queued_at",
+        "oldest_queued_at",
+        "path",
+        "quarantined",
+        "service",
+    )
+
+    def __init__(
+        self,
+        path: str,
+        counters: dict[str, int],
+        oldest_queued_at: float | None,
+        newest_queued_at: float | None,
+        file_bytes: int,
+        quarantined: str | None,
+        leased: int,
+        service: ServiceState | None = None,
+        max_bytes: int = 0,
+        extra_drops: dict[str, int] | None = None,
+    ) -> None:
+        self.path, self.counters, self.file_bytes = path, counters, file_bytes
+        self.oldest_queued_at, self.newest_queued_at = oldest_queued_at, newest_queued_at
+        self.quarantined, self.leased, self.service = quarantined, leased, service
+        self.max_bytes, self.extra_drops = max_bytes, extra_drops or {}
 
     @property
     def depth(self) -> int:
@@ -77,16 +100,18 @@ class QueueStats:
         return {reason: n for reason, n in drops.items() if n}
 
 
-def file_bytes(path: Path) -> int:
+def file_bytes(path: str | os.PathLike[str]) -> int:
     """Bytes on disk of the queue: the database, its WAL and shared-memory files."""
     total = 0
     for suffix in ("", "-wal", "-shm"):
-        with contextlib.suppress(FileNotFoundError):
-            total += Path(f"{path}{suffix}").stat().st_size
+        try:
+            total += os.stat(f"{os.fspath(path)}{suffix}").st_size
+        except FileNotFoundError:
+            continue
     return total
 
 
-def stats_from(connection: sqlite3.Connection, path: Path, now: float) -> QueueStats:
+def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueStats:
     """Read the stats through ``connection`` (the caller holds any lock it needs)."""
     tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
     if "counters" not in tables:
@@ -105,7 +130,7 @@ def stats_from(connection: sqlite3.Connection, path: Path, now: float) -> QueueS
         row = connection.execute(
             "SELECT heartbeat_at, running, document FROM service_state WHERE id = 1"
         ).fetchone()
-    service = ServiceState(row[0], bool(row[1]), orjson.loads(row[2])) if row else None
+    service = ServiceState(row[0], bool(row[1]), json.loads(row[2])) if row else None
     return QueueStats(
         path=str(path),
         counters=counters,
@@ -118,22 +143,23 @@ def stats_from(connection: sqlite3.Connection, path: Path, now: float) -> QueueS
     )
 
 
-def read_stats(path: Path, now: float) -> QueueStats | None:
+def read_stats(path: str, now: float) -> QueueStats | None:
     """The stats of the queue at ``path`` without writing to it; None when there is no
     file there. Raises a one-line ``QueueError`` for anything that is not a readable
     queue (a directory, a device, another application's file, a corrupt file)."""
     try:
-        mode = path.stat().st_mode
+        mode = os.stat(path).st_mode
     except FileNotFoundError:
         return None
     except OSError as exc:
         raise QueueError(f"queue {path}: cannot read ({exc.strerror})") from None
     if not stat.S_ISREG(mode):
         raise QueueError(f"queue {path}: not a regular file - set QUEUE_PATH to the queue file")
+    uri = "file:" + os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace(
+        "#", "%23"
+    )
     try:
-        connection = sqlite3.connect(
-            f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=READ_TIMEOUT_S
-        )
+        connection = sqlite3.connect(f"{uri}?mode=ro", uri=True, timeout=READ_TIMEOUT_S)
         try:
             return stats_from(connection, path, now)
         finally:

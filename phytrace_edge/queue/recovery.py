@@ -14,46 +14,16 @@ import sqlite3
 import time
 from pathlib import Path
 
-from phytrace_edge.errors import QueueBusyError, QueueError, QueueFullError
+from phytrace_edge.errors import QueueBusyError, QueueError
+from phytrace_edge.queue.sqlite_errors import (
+    SQLITE_BUSY,
+    SQLITE_CORRUPT,
+    SQLITE_LOCKED,
+    SQLITE_NOTADB,
+    sqlite_code,
+)
 
 log = logging.getLogger(__name__)
-
-# SQLite result codes (the sqlite3 module names them only from Python 3.11)
-SQLITE_PERM, SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY = 3, 5, 6, 8
-SQLITE_IOERR, SQLITE_CORRUPT, SQLITE_FULL, SQLITE_CANTOPEN = 10, 11, 13, 14
-SQLITE_NOTADB = 26
-_CODE_BY_TEXT = {
-    "file is not a database": SQLITE_NOTADB,
-    "database disk image is malformed": SQLITE_CORRUPT,
-    "database is locked": SQLITE_BUSY,
-    "database or disk is full": SQLITE_FULL,
-    "unable to open database file": SQLITE_CANTOPEN,
-    "attempt to write a readonly database": SQLITE_READONLY,
-    "disk I/O error": SQLITE_IOERR,
-}
-# what the operator should do about each, after "queue PATH: "
-_HINTS = {
-    SQLITE_FULL: "disk full - free space on the volume or lower QUEUE_MAX_BYTES",
-    SQLITE_BUSY: "locked by another process past the busy timeout - is another bridge "
-    "or a long drain using this queue?",
-    SQLITE_READONLY: "read-only - the queue file and its folder must be writable by the bridge",
-    SQLITE_CANTOPEN: "cannot open - check QUEUE_PATH, and that its folder exists and is "
-    "readable by this user",
-    SQLITE_PERM: "permission denied - run as the bridge's user or fix the file's owner",
-    SQLITE_IOERR: "disk I/O error - check the disk (dmesg) and free space",
-    SQLITE_CORRUPT: "damaged - the bridge moves such a file aside at its next start",
-    SQLITE_NOTADB: "not a SQLite database - check QUEUE_PATH; the bridge moves a foreign "
-    "file aside at its next start",
-}
-_HINTS[SQLITE_LOCKED] = _HINTS[SQLITE_BUSY]
-
-
-def sqlite_code(exc: sqlite3.Error) -> int | None:
-    """The primary SQLite result code of an error (from its text on Python 3.10)."""
-    code = getattr(exc, "sqlite_errorcode", None)
-    if code is not None:
-        return int(code) & 0xFF
-    return next((c for text, c in _CODE_BY_TEXT.items() if text in str(exc)), None)
 
 
 def connect(path: Path, busy_timeout_s: float) -> sqlite3.Connection:
@@ -133,14 +103,3 @@ def _create_private(path: Path) -> None:
     descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o600)
     os.close(descriptor)
     path.chmod(0o600)
-
-
-def queue_error(exc: sqlite3.Error, path: Path) -> QueueError:
-    """Map a SQLite error to the queue error type, with a message that says what to do."""
-    code = sqlite_code(exc)
-    message = f"queue {path}: {_HINTS.get(code, str(exc)) if code is not None else exc}"
-    if code == SQLITE_FULL:
-        return QueueFullError(message)
-    if code in (SQLITE_BUSY, SQLITE_LOCKED):
-        return QueueBusyError(message)
-    return QueueError(message)

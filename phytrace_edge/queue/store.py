@@ -24,7 +24,6 @@ import sqlite3
 import time
 import uuid
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,19 +35,20 @@ from phytrace_edge.queue.caps import Caps, drop_oldest, wal_reserve
 from phytrace_edge.queue.codecs import Codecs, Encoded, packaged_dictionary
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.dead_letters import DeadLetterBox
-from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
-from phytrace_edge.queue.migrate import migrate
-from phytrace_edge.queue.options import (
+from phytrace_edge.queue.defaults import (
     DEFAULT_BUSY_TIMEOUT_S,
     DEFAULT_COMPRESSION,
     DEFAULT_LEASE_S,
     DEFAULT_SYNC,
-    QueueLimits,
 )
+from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
+from phytrace_edge.queue.migrate import migrate
+from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult, QueuedEvent
-from phytrace_edge.queue.recovery import open_checked, queue_error
+from phytrace_edge.queue.recovery import open_checked
 from phytrace_edge.queue.rows import delete_range, insert_rows
 from phytrace_edge.queue.service_state import write_service_state
+from phytrace_edge.queue.sqlite_errors import queue_error
 from phytrace_edge.units import format_bytes
 
 log = logging.getLogger(__name__)
@@ -356,12 +356,12 @@ class QueueStore:
         """What ``status`` shows about the queue (drops not yet written included)."""
         with self._db.lock:
             try:
-                stats = stats_from(self._db.connection, self.path, self._clock())
+                stats = stats_from(self._db.connection, str(self.path), self._clock())
             except sqlite3.Error as exc:
                 raise queue_error(exc, self.path) from exc
         deferred = self._db.deferred_counts()
-        return replace(
-            stats,
-            max_bytes=self.limits.max_bytes,
-            extra_drops={name[5:]: n for name, n in deferred.items() if name.startswith("drop:")},
-        )
+        stats.max_bytes = self.limits.max_bytes
+        stats.extra_drops = {
+            name[5:]: n for name, n in deferred.items() if name.startswith("drop:")
+        }
+        return stats

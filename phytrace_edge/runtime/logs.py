@@ -13,7 +13,7 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.redact import redact
+from phytrace_edge.redact import leak_forms, redact
 from phytrace_edge.udm.event import format_timestamp
 
 TEXT_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -38,18 +38,19 @@ class RedactSecrets(logging.Filter):
 
     def __init__(self, secrets: Iterable[str]) -> None:
         super().__init__()
-        self._secrets = [s for s in secrets if len(s) >= 4]
+        forms = {form for s in secrets if len(s) >= 4 for form in leak_forms(s)}
+        self._forms = sorted(forms, key=len, reverse=True)
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if not self._secrets:
+        if not self._forms:
             return True
         message = record.getMessage()
-        masked = redact(message, self._secrets)
+        masked = redact(message, self._forms)
         if masked != message:
             record.msg, record.args = masked, None
         if record.exc_info:
             text = logging.Formatter().formatException(record.exc_info)
-            record.exc_text = redact(text, self._secrets)
+            record.exc_text = redact(text, self._forms)
         return True
 
 

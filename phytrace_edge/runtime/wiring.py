@@ -18,22 +18,20 @@ imports nothing of the bridge.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
-from urllib.parse import urlsplit
 
-from phytrace_edge.builder.options import BuilderOptions, Identity
-from phytrace_edge.config import Settings
-from phytrace_edge.ingest.sources.base import SourceOptions
-from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.runtime.health import Thresholds
-from phytrace_edge.ship.options import SendPolicy
-
-# The parts are imported where they are built: ``status`` and ``--help`` read the
-# settings through this module and must not pay for HTTP, retries or the handlers.
+# The parts are imported where they are built: ``status`` reads its settings through
+# this module and must start fast (stdlib only at import, docs/benchmarks.md).
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
 if TYPE_CHECKING:
+    from typing import Any
+
+    from phytrace_edge.builder.options import BuilderOptions, Identity
+    from phytrace_edge.config import Settings
+    from phytrace_edge.ingest.sources.base import SourceOptions
     from phytrace_edge.queue.store import QueueStore
+    from phytrace_edge.runtime.health import Thresholds
     from phytrace_edge.runtime.service import BridgeService, ServiceOptions
+    from phytrace_edge.ship.options import SendPolicy
     from phytrace_edge.ship.transport import HttpTransport, Transport
 
 MIN_LEASE_S = 60.0
@@ -48,10 +46,14 @@ def configure_logging(s: Settings) -> None:
 
 
 def identity(s: Settings) -> Identity:
+    from phytrace_edge.builder.options import Identity
+
     return Identity(s.source_id, s.source_type, s.fleet_id, s.site_id)
 
 
 def builder_options(s: Settings) -> BuilderOptions:
+    from phytrace_edge.builder.options import BuilderOptions
+
     return BuilderOptions(identity(s), s.sample_rate_hz, s.stale_after_s, s.use_sim_time)
 
 
@@ -59,6 +61,8 @@ def source_options(
     s: Settings, env: Mapping[str, str], ros_args: Sequence[str] = (), **simulator: Any
 ) -> SourceOptions:
     """BRIDGE_INPUT and the topic settings; ``env`` is read for ROS 2's DDS variables."""
+    from phytrace_edge.ingest.sources.base import SourceOptions
+
     kind, _, bag_path = s.bridge_input.partition(":")
     domain_id, localhost_only = 0, False
     if kind == "dds":
@@ -78,13 +82,14 @@ def source_options(
     )
 
 
-def queue_path(s: Settings) -> Path:
-    return Path(str(s.queue_path))
+def queue_path(s: Settings) -> str:
+    return str(s.queue_path)
 
 
 def open_queue(s: Settings) -> QueueStore:
     """The queue named by the settings. The lease outlives the longest retry wait, so a
     batch that is still being retried is not taken by a second sender."""
+    from phytrace_edge.queue.options import QueueLimits
     from phytrace_edge.queue.store import QueueStore
 
     return QueueStore.open(
@@ -102,6 +107,8 @@ def open_queue(s: Settings) -> QueueStore:
 
 
 def send_policy(s: Settings) -> SendPolicy:
+    from phytrace_edge.ship.options import SendPolicy
+
     return SendPolicy(
         batch_size=s.batch_size,
         batch_max_bytes=s.batch_max_bytes,
@@ -120,12 +127,16 @@ def http_transport(s: Settings) -> HttpTransport:
 
 
 def health_thresholds(s: Settings) -> Thresholds:
+    from phytrace_edge.runtime.health import Thresholds
+
     return Thresholds(
         s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
     )
 
 
 def service_options(s: Settings) -> ServiceOptions:
+    from urllib.parse import urlsplit
+
     from phytrace_edge.runtime.service import ServiceOptions
 
     return ServiceOptions(
@@ -149,13 +160,15 @@ def build_service(
     on_event: Callable[[dict[str, Any]], None] | None = None,
 ) -> BridgeService:
     """Every part of the bridge, wired; ``transport`` replaces HTTP in tests."""
+    from pathlib import Path
+
     from phytrace_edge.builder.builder import UDMBuilder
     from phytrace_edge.ingest.sources.registry import create_source
     from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
     from phytrace_edge.runtime.service import BridgeService
     from phytrace_edge.ship.sender import Sender
 
-    warn_if_not_on_a_volume(queue_path(s), env)
+    warn_if_not_on_a_volume(Path(queue_path(s)), env)
     source = create_source(source_options(s, env, ros_args))
     store = open_queue(s)
     try:

@@ -1,20 +1,17 @@
-"""How batches are formed, sent and retried, and the defaults of those settings."""
+"""How batches are formed, sent and retried (the send policy)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from phytrace_edge.units import MIB
-
-DEFAULT_ENDPOINT = "http://localhost:8000/api/v1"
-DEFAULT_BATCH_SIZE = 10
-DEFAULT_BATCH_MAX_BYTES = 1 * MIB
-DEFAULT_FLUSH_INTERVAL_S = 2.0
-DEFAULT_RETRY_MIN_S = 0.5
-DEFAULT_RETRY_MAX_S = 60.0
-DEFAULT_HTTP_TIMEOUT_S = 10.0
-HTTP_COMPRESSIONS = ("gzip", "zstd", "none")
-DEFAULT_HTTP_COMPRESSION = "gzip"
+from phytrace_edge.ship.defaults import (
+    DEFAULT_BATCH_MAX_BYTES,
+    DEFAULT_BATCH_SIZE,
+    DEFAULT_FLUSH_INTERVAL_S,
+    DEFAULT_HTTP_COMPRESSION,
+    DEFAULT_RETRY_MAX_S,
+    DEFAULT_RETRY_MIN_S,
+)
 
 
 @dataclass(frozen=True)

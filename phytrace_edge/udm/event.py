@@ -1,11 +1,9 @@
-"""Event ids and timestamps of the UDM."""
+"""Event ids and timestamps of the UDM (stdlib only: ``status`` formats its times here)."""
 
 from __future__ import annotations
 
 import os
 import time
-import uuid
-from datetime import datetime, timezone
 
 
 def new_event_id(unix_ms: int | None = None) -> str:
@@ -18,11 +16,11 @@ def new_event_id(unix_ms: int | None = None) -> str:
     value = (ms & (2**48 - 1)) << 80 | int.from_bytes(os.urandom(10), "big")
     value = value & ~(0xF << 76) | 0x7 << 76  # version 7
     value = value & ~(0x3 << 62) | 0x2 << 62  # RFC 4122 variant
-    return str(uuid.UUID(int=value))
+    text = f"{value:032x}"
+    return f"{text[:8]}-{text[8:12]}-{text[12:16]}-{text[16:20]}-{text[20:]}"
 
 
 def format_timestamp(unix_s: float) -> str:
     """UTC ISO-8601 with milliseconds and ``Z``: ``2025-01-15T14:23:01.042Z``."""
     ms = round(unix_s * 1000)
-    moment = datetime.fromtimestamp(ms // 1000, tz=timezone.utc)
-    return f"{moment:%Y-%m-%dT%H:%M:%S}.{ms % 1000:03d}Z"
+    return f"{time.strftime('%Y-%m-%dT%H:%M:%S', time.gmtime(ms // 1000))}.{ms % 1000:03d}Z"

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.cli import build_parser
+from phytrace_edge.cli import build_parser, command_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools"))
@@ -39,7 +39,7 @@ def test_every_command_and_option_has_help_text(name: str) -> None:
         a for a in parser._actions if isinstance(a, argparse._SubParsersAction)
     )._choices_actions
     assert any(a.dest == name and a.help for a in choices), f"{name} has no help line"
-    for action in COMMANDS[name]._actions:
+    for action in command_parser(name)._actions:
         if action.option_strings and action.dest != "help":
             assert action.help, f"{name} {action.option_strings} has no help text"
 

@@ -13,9 +13,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from phytrace_edge.ingest.defaults import DEFAULT_REPLAY_RATE
 from phytrace_edge.ingest.qos import QosChoice
 
-DEFAULT_REPLAY_RATE = 1.0
 NODE_NAME = "phytrace_edge"
 
 

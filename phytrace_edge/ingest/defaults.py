@@ -1,0 +1,4 @@
+"""Defaults of the ingest settings (plain constants: the configuration reads them
+without importing the stage)."""
+
+DEFAULT_REPLAY_RATE = 1.0  # a bag at its recorded speed
