@@ -55,6 +55,14 @@ def _text(raw: Any) -> str:
     return raw.strip()
 
 
+def _text_or(raw: Any, allowed: str) -> str:
+    """``_text``, failing with the setting's rule as the message."""
+    try:
+        return _text(raw)
+    except ValueError:
+        raise ValueError(allowed) from None
+
+
 def _float(raw: Any) -> float:
     if isinstance(raw, bool):
         raise ValueError
@@ -78,46 +86,31 @@ def _int(raw: Any) -> int:
     return int(text)
 
 
-def positive_float(upper: float) -> Callable[[Any], float]:
-    def parse(raw: Any) -> float:
-        allowed = f"a number > 0 and <= {upper:g}"
+def _bounded(
+    convert: Callable[[Any], Any], lower: float, upper: float, allowed: str, open_low: bool
+) -> Callable[[Any], Any]:
+    def parse(raw: Any) -> Any:
         try:
-            value = _float(raw)
+            value = convert(raw)
         except ValueError:
             raise ValueError(allowed) from None
-        if not 0 < value <= upper:
+        if value > upper or value < lower or (open_low and value == lower):
             raise ValueError(allowed)
         return value
 
     return parse
+
+
+def positive_float(upper: float) -> Callable[[Any], float]:
+    return _bounded(_float, 0, upper, f"a number > 0 and <= {upper:g}", open_low=True)
 
 
 def non_negative_float(upper: float) -> Callable[[Any], float]:
-    def parse(raw: Any) -> float:
-        allowed = f"a number from 0 to {upper:g}"
-        try:
-            value = _float(raw)
-        except ValueError:
-            raise ValueError(allowed) from None
-        if not 0 <= value <= upper:
-            raise ValueError(allowed)
-        return value
-
-    return parse
+    return _bounded(_float, 0, upper, f"a number from 0 to {upper:g}", open_low=False)
 
 
 def int_between(lower: int, upper: int) -> Callable[[Any], int]:
-    def parse(raw: Any) -> int:
-        allowed = f"a whole number from {lower} to {upper}"
-        try:
-            value = _int(raw)
-        except ValueError:
-            raise ValueError(allowed) from None
-        if not lower <= value <= upper:
-            raise ValueError(allowed)
-        return value
-
-    return parse
+    return _bounded(_int, lower, upper, f"a whole number from {lower} to {upper}", open_low=False)
 
 
 def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
@@ -135,10 +128,7 @@ def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
 def one_of(*choices: str) -> Callable[[Any], str]:
     def parse(raw: Any) -> str:
         allowed = "one of " + ", ".join(choices)
-        try:
-            value = _text(raw).lower()
-        except ValueError:
-            raise ValueError(allowed) from None
+        value = _text_or(raw, allowed).lower()
         if value not in choices:
             raise ValueError(allowed)
         return value
@@ -208,10 +198,7 @@ def _valid_host(host: str) -> bool:
 
 def identifier(raw: Any) -> str:
     allowed = "1-128 characters of letters, digits and . _ : @ - (starting alnum)"
-    try:
-        value = _text(raw)
-    except ValueError:
-        raise ValueError(allowed) from None
+    value = _text_or(raw, allowed)
     if not _matches(_IDENTIFIER, value):
         raise ValueError(allowed)
     return value
@@ -219,10 +206,7 @@ def identifier(raw: Any) -> str:
 
 def bridge_input(raw: Any) -> str:
     allowed = "ros, dds, sim or bag:PATH"
-    try:
-        value = _text(raw)
-    except ValueError:
-        raise ValueError(allowed) from None
+    value = _text_or(raw, allowed)
     if value in ("ros", "dds", "sim") or (value.startswith("bag:") and len(value) > 4):
         return value
     raise ValueError(allowed)
@@ -246,10 +230,7 @@ def ca_file(raw: Any) -> str:
 
 def path_value(raw: Any) -> str:
     allowed = "a file path"
-    try:
-        value = _text(raw)
-    except ValueError:
-        raise ValueError(allowed) from None
+    value = _text_or(raw, allowed)
     if not value or "\x00" in value:
         raise ValueError(allowed)
     return os.path.expanduser(value)
@@ -259,10 +240,7 @@ def boolean(raw: Any) -> bool:
     if isinstance(raw, bool):
         return raw
     allowed = "true or false"
-    try:
-        value = _text(raw).lower()
-    except ValueError:
-        raise ValueError(allowed) from None
+    value = _text_or(raw, allowed).lower()
     if value in ("1", "true", "yes", "on"):
         return True
     if value in ("0", "false", "no", "off"):
@@ -271,13 +249,7 @@ def boolean(raw: Any) -> bool:
 
 
 def _topic_list(raw: Any, allowed: str) -> list[str]:
-    if isinstance(raw, list):
-        items = raw
-    else:
-        try:
-            items = _text(raw).split(",")
-        except ValueError:
-            raise ValueError(allowed) from None
+    items = raw if isinstance(raw, list) else _text_or(raw, allowed).split(",")
     if not all(isinstance(item, str) for item in items):
         raise ValueError(allowed)
     return [item.strip() for item in items if item.strip()]
@@ -327,10 +299,7 @@ def topic_qos(raw: Any) -> dict[str, QosChoice]:
 
 def namespace(raw: Any) -> str:
     allowed = "a ROS namespace like /robot1"
-    try:
-        value = _text(raw).rstrip("/")
-    except ValueError:
-        raise ValueError(allowed) from None
+    value = _text_or(raw, allowed).rstrip("/")
     if not _matches(_NAMESPACE, value):
         raise ValueError(allowed)
     return value

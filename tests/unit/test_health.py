@@ -1,0 +1,61 @@
+"""The status verdict: a pure function of the queue's stats and the service's last
+heartbeat (runtime/health.py), on known inputs."""
+
+from __future__ import annotations
+
+from phytrace_edge.queue.inspect import QueueStats, ServiceState
+from phytrace_edge.runtime.health import Thresholds, exit_code, report
+from phytrace_edge.units import GIB
+
+NOW = 1_800_000_000.0
+LIMITS = Thresholds(
+    stale_after_s=15, no_progress_s=300, queue_warn_fraction=0.8, queue_max_bytes=GIB
+)
+
+
+def stats(heartbeat_age: float | None = 1.0, **document) -> QueueStats:
+    service = (
+        None
+        if heartbeat_age is None
+        else ServiceState(NOW - heartbeat_age, True, {"sender": {}, **document})
+    )
+    return QueueStats("/q.db", {"depth": 0}, None, None, 4096, None, 0, service)
+
+
+def stage(age: float, restarts: int = 0, **extra) -> dict:
+    return {"progress_age_s": age, "restarts": restarts, "stall_after_s": 30.0, **extra}
+
+
+def test_a_running_service_with_every_stage_moving_is_healthy() -> None:
+    doc = report(
+        stats(stages={"sender": stage(0.5), "writer": stage(1.0, restarts=2)}), LIMITS, NOW
+    )
+    assert doc["healthy"] and exit_code(doc) == 0
+    assert doc["thread_restarts"] == {"sender": 0, "writer": 2}
+
+
+def test_a_stage_without_progress_is_named_with_how_long() -> None:
+    doc = report(stats(stages={"sender": stage(95.0), "writer": stage(1.0)}), LIMITS, NOW)
+    assert not doc["healthy"] and exit_code(doc) == 1
+    assert doc["problems"] == ["stage sender has made no progress for 95 s"]
+
+
+def test_a_stage_within_its_own_bound_is_not_stuck() -> None:
+    # a request may take up to HTTP_TIMEOUT_S: the stall bound is the larger of the two
+    doc = report(stats(stages={"sender": stage(20.0)}), LIMITS, NOW)
+    assert doc["healthy"], doc["problems"]
+
+
+def test_a_stage_that_could_not_be_kept_alive_is_reported() -> None:
+    failed = stage(70.0, restarts=5, failed="thread sender failed 5 times in 60 s")
+    doc = report(stats(stages={"sender": failed}), LIMITS, NOW)
+    assert doc["problems"] == [
+        "stage sender could not be kept alive: thread sender failed 5 times in 60 s"
+    ]
+
+
+def test_stages_of_a_stopped_service_are_not_judged() -> None:
+    doc = report(stats(heartbeat_age=None), LIMITS, NOW)
+    assert doc["problems"] == [] and not doc["running"] and exit_code(doc) == 3
+    doc = report(stats(heartbeat_age=120.0, stages={"sender": stage(500.0)}), LIMITS, NOW)
+    assert doc["problems"] == ["heartbeat is 120 s old: the service hung or died"]
