@@ -65,7 +65,8 @@ class RoomEstimate:
 
 
 def wal_reserve(max_bytes: int) -> int:
-    """The share of the byte cap kept for the WAL (SQLite's journal_size_limit)."""
+    """The share of the byte cap kept for the WAL (SQLite's journal_size_limit), and
+    the size of the full-disk reserve (``reserve.py``): each takes this much."""
     return min(WAL_RESERVE_MAX, max_bytes // 8)
 
 
@@ -74,7 +75,7 @@ class Caps:
 
     def __init__(self, limits: QueueLimits, page_size: int) -> None:
         self.limits = limits
-        self.data_cap = limits.max_bytes - wal_reserve(limits.max_bytes)
+        self.data_cap = limits.max_bytes - 2 * wal_reserve(limits.max_bytes)
         self.page_size = page_size
         self.room = RoomEstimate(self.data_cap, limits.max_events)
 

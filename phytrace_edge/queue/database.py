@@ -14,22 +14,42 @@ import contextlib
 import sqlite3
 import threading
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
+from phytrace_edge.errors import QueueFullError
+from phytrace_edge.queue.reserve import SpaceReserve
 from phytrace_edge.queue.sqlite_errors import queue_error
+
+T = TypeVar("T")
 
 
 class Database:
     """One SQLite connection shared by the queue's threads, serialised by a lock."""
 
-    def __init__(self, connection: sqlite3.Connection, path: Path) -> None:
+    def __init__(
+        self, connection: sqlite3.Connection, path: Path, reserve: SpaceReserve | None = None
+    ) -> None:
         self.path = path
         self.connection = connection
+        self.reserve = reserve
         self.lock = threading.RLock()
         self.page_size = int(connection.execute("PRAGMA page_size").fetchone()[0])
         self._deferred: Counter[str] = Counter()
+
+    def write(self, body: Callable[[sqlite3.Cursor], T]) -> T:
+        """Run ``body`` in a write transaction that must happen even on a full disk (a
+        delete, a claim, a count): the first time the disk is full, the space reserve
+        is given up and ``body`` runs again (see ``reserve``)."""
+        try:
+            with self.transaction() as cursor:
+                return body(cursor)
+        except QueueFullError:
+            if self.reserve is None or not self.reserve.release():
+                raise
+        with self.transaction() as cursor:
+            return body(cursor)
 
     @contextlib.contextmanager
     def transaction(self) -> Iterator[sqlite3.Cursor]:

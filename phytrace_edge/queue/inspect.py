@@ -101,9 +101,10 @@ class QueueStats:
 
 
 def file_bytes(path: str | os.PathLike[str]) -> int:
-    """Bytes on disk of the queue: the database, its WAL and shared-memory files."""
+    """Bytes on disk of the queue: the database, its WAL and shared-memory files, and
+    its full-disk reserve."""
     total = 0
-    for suffix in ("", "-wal", "-shm"):
+    for suffix in ("", "-wal", "-shm", "-reserve"):
         try:
             total += os.stat(f"{os.fspath(path)}{suffix}").st_size
         except FileNotFoundError:

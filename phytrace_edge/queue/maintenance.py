@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sqlite3
+
 from phytrace_edge.queue import leases
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.rows import delete_range
@@ -13,8 +15,9 @@ RECLAIM_MIN_BYTES = 1 * MIB
 
 def expire(db: Database, cutoff: float, now: float) -> int:
     """Delete events queued before ``cutoff`` (not those being sent); the count."""
-    expired = 0
-    with db.transaction() as cursor:
+
+    def delete_expired(cursor: sqlite3.Cursor) -> int:
+        expired = 0
         for low, high in leases.free_ranges(cursor, now):
             while True:
                 rows = cursor.execute(
@@ -31,7 +34,9 @@ def expire(db: Database, cutoff: float, now: float) -> int:
                 if fresh_at < len(rows):
                     break
         bump_counters(cursor, **{"drop:ttl": expired})
-    return expired
+        return expired
+
+    return db.write(delete_expired)
 
 
 def reclaim_space(db: Database, force: bool = False) -> None:

@@ -34,6 +34,11 @@ def migration_files(folder: Path | None = None) -> list[tuple[int, Path]]:
     return found
 
 
+def latest_version() -> int:
+    """The schema version this code writes: the number of the last migration."""
+    return len(migration_files())
+
+
 def migrate(connection: sqlite3.Connection, up_to: int | None = None) -> int:
     """Apply pending migrations (all, or up to version ``up_to``); the new version."""
     current = connection.execute("PRAGMA user_version").fetchone()[0]

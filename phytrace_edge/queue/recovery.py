@@ -1,9 +1,13 @@
-"""Opening the queue file safely: permissions, integrity check, quarantine.
+"""Opening the queue file safely: its place, permissions, integrity, schema, quarantine.
 
-A queue file that is corrupt or is not SQLite at all must never brick the bridge (as
-corrupt buffer files have bricked other agents) and must never be deleted: it is moved
-aside with a timestamped name, reported at ERROR, and a fresh queue starts. A file that
-is merely busy or unreadable is *not* corrupt and is never moved.
+A queue file that is corrupt, is not SQLite at all, or is another application's
+database must never brick the bridge (as corrupt buffer files have bricked other
+agents) and must never be deleted or changed: it is moved aside with a timestamped
+name, reported at ERROR, and a fresh queue starts. A file that is merely busy or
+unreadable is *not* corrupt and is never moved. A queue written by a newer version is
+refused, not used. The path must be a regular file, or a missing one the bridge then
+creates with mode 0600; nothing else is ever chmod'ed or opened (``/dev/null`` as root
+would otherwise be made 0600 for every process of the robot).
 """
 
 from __future__ import annotations
@@ -11,10 +15,12 @@ from __future__ import annotations
 import logging
 import os
 import sqlite3
+import stat
 import time
 from pathlib import Path
 
 from phytrace_edge.errors import QueueBusyError, QueueError
+from phytrace_edge.queue.migrate import latest_version
 from phytrace_edge.queue.sqlite_errors import (
     SQLITE_BUSY,
     SQLITE_CORRUPT,
@@ -37,13 +43,15 @@ def connect(path: Path, busy_timeout_s: float) -> sqlite3.Connection:
 
 def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection, Path | None]:
     """Open the queue at ``path`` in WAL mode; (connection, where a bad file was moved)."""
-    path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+    exists = _check_place(path)
     quarantined = None
-    if path.exists() and path.stat().st_size > 0:
+    if exists and path.stat().st_size > 0:
         problem = _integrity_problem(path, busy_timeout_s)
         if problem is not None:
             quarantined = quarantine(path, problem)
-    _create_private(path)
+            exists = False
+    if not exists:
+        _create_private(path)
     try:
         connection = connect(path, busy_timeout_s)
         mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
@@ -56,12 +64,35 @@ def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection,
     return connection, quarantined
 
 
+def _check_place(path: Path) -> bool:
+    """Whether a queue file exists at ``path``; raises a one-line QueueError for a path
+    that is not a regular file, or whose folder cannot be made."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        except OSError as exc:
+            raise QueueError(
+                f"queue {path}: cannot create its folder ({exc.strerror}) - check QUEUE_PATH"
+            ) from None
+        return False
+    except OSError as exc:
+        raise QueueError(f"queue {path}: cannot read ({exc.strerror})") from None
+    if not stat.S_ISREG(mode):
+        raise QueueError(f"queue {path}: not a regular file - set QUEUE_PATH to a file")
+    return True
+
+
 def _integrity_problem(path: Path, busy_timeout_s: float) -> str | None:
-    """What is wrong with an existing file, or None if it is a sound SQLite database."""
+    """What is wrong with an existing file, or None if it is a sound queue database.
+    Raises QueueError for a queue of a newer version (not ours to change)."""
     try:
         connection = connect(path, busy_timeout_s)
         try:
             result = connection.execute("PRAGMA quick_check").fetchone()[0]
+            version = connection.execute("PRAGMA user_version").fetchone()[0]
+            tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
         finally:
             connection.close()
     except sqlite3.Error as exc:
@@ -71,7 +102,17 @@ def _integrity_problem(path: Path, busy_timeout_s: float) -> str | None:
         if code in (SQLITE_BUSY, SQLITE_LOCKED):
             raise QueueBusyError(f"queue {path}: locked by another process") from exc
         raise QueueError(f"queue {path}: cannot read ({exc})") from exc
-    return None if result == "ok" else f"quick_check: {result}"
+    if result != "ok":
+        return f"quick_check: {result}"
+    if (version == 0 and tables) or (version > 0 and "counters" not in tables):
+        return f"not a phytrace-edge queue (tables: {', '.join(sorted(tables))[:200]})"
+    if version > latest_version():
+        raise QueueError(
+            f"queue {path}: written by a newer phytrace-edge (schema version {version}; this "
+            f"one knows up to {latest_version()}) - upgrade phytrace-edge or set QUEUE_PATH "
+            "to another file"
+        )
+    return None
 
 
 def quarantine(path: Path, problem: str) -> Path:
@@ -82,11 +123,17 @@ def quarantine(path: Path, problem: str) -> Path:
     while target.exists():
         serial += 1
         target = path.with_name(f"{path.name}.corrupt-{stamp}-{serial}")
-    path.rename(target)
-    for suffix in ("-wal", "-shm"):
-        companion = Path(f"{path}{suffix}")
-        if companion.exists():
-            companion.rename(Path(f"{target}{suffix}"))
+    try:
+        path.rename(target)
+        for suffix in ("-wal", "-shm"):
+            companion = Path(f"{path}{suffix}")
+            if companion.exists():
+                companion.rename(Path(f"{target}{suffix}"))
+    except OSError as exc:
+        raise QueueError(
+            f"queue {path} is unusable ({problem}) and cannot be moved aside "
+            f"({exc.strerror}) - move it away by hand or set QUEUE_PATH to another file"
+        ) from None
     log.error(
         "queue %s is unreadable (%s): moved to %s and started a fresh queue; the old file is "
         "kept for inspection (sqlite3 %s '.recover')",
@@ -99,7 +146,16 @@ def quarantine(path: Path, problem: str) -> Path:
 
 
 def _create_private(path: Path) -> None:
-    """Create the file with mode 0600 before SQLite does (its -wal/-shm inherit it)."""
-    descriptor = os.open(path, os.O_CREAT | os.O_RDWR, 0o600)
+    """Create the file with mode 0600 before SQLite does (its -wal/-shm inherit it).
+    Only a file created here is given that mode: nothing else is ever chmod'ed."""
+    try:
+        descriptor = os.open(path, os.O_CREAT | os.O_EXCL | os.O_RDWR, 0o600)
+    except FileExistsError:  # created since we looked: another process's, leave it be
+        return
+    except OSError as exc:
+        raise QueueError(
+            f"queue {path}: cannot create it ({exc.strerror}) - the queue's folder must be "
+            "writable by the bridge"
+        ) from None
     os.close(descriptor)
-    path.chmod(0o600)
+    os.chmod(path, 0o600)  # noqa: PTH101 - the umask may have taken bits off

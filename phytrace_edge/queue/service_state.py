@@ -13,9 +13,11 @@ from phytrace_edge.queue.database import Database
 
 
 def write_service_state(db: Database, document: dict[str, Any], running: bool, now: float) -> None:
-    with db.transaction() as cursor:
-        cursor.execute(
+    row = (now, int(running), orjson.dumps(document).decode())
+    db.write(
+        lambda cursor: cursor.execute(
             "INSERT OR REPLACE INTO service_state(id, heartbeat_at, running, document) "
             "VALUES (1, ?, ?, ?)",
-            (now, int(running), orjson.dumps(document).decode()),
+            row,
         )
+    )

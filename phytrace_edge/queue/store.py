@@ -22,7 +22,6 @@ import logging
 import os
 import sqlite3
 import time
-import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from typing import Any
 import orjson
 
 from phytrace_edge.errors import QueueError, QueueFullError
-from phytrace_edge.queue import leases, maintenance
+from phytrace_edge.queue import claims, leases, maintenance
 from phytrace_edge.queue.caps import Caps, drop_oldest, wal_reserve
 from phytrace_edge.queue.codecs import Codecs, Encoded, packaged_dictionary
 from phytrace_edge.queue.database import Database, bump_counters
@@ -44,9 +43,11 @@ from phytrace_edge.queue.defaults import (
 from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.migrate import migrate
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.ownership import Owner, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult, QueuedEvent
 from phytrace_edge.queue.recovery import open_checked
-from phytrace_edge.queue.rows import delete_range, insert_rows
+from phytrace_edge.queue.reserve import SpaceReserve
+from phytrace_edge.queue.rows import insert_rows
 from phytrace_edge.queue.service_state import write_service_state
 from phytrace_edge.queue.sqlite_errors import queue_error
 from phytrace_edge.units import format_bytes
@@ -54,6 +55,7 @@ from phytrace_edge.units import format_bytes
 log = logging.getLogger(__name__)
 
 CACHE_KIB = 8000  # SQLite's page cache: 8 MiB, whatever the backlog
+ORPHAN_CHECK_S = 2.0
 
 
 class QueueStore:
@@ -73,13 +75,17 @@ class QueueStore:
         self.limits = limits
         self.lease_s = lease_s
         self._clock = clock
-        self._owner = uuid.uuid4().hex
+        self._owner = Owner(db.path)
         self._claims = itertools.count(1)
+        self._next_orphan_check = 0.0
         self.codecs = Codecs(compression)
         self._caps = Caps(limits, db.page_size)
         self._wal_reserve = wal_reserve(limits.max_bytes)
         db.execute(f"PRAGMA journal_size_limit = {self._wal_reserve}")
-        db.execute(f"PRAGMA wal_autocheckpoint = {max(16, self._wal_reserve // db.page_size // 2)}")
+        # checkpoints often enough that moving the WAL into the database never needs
+        # more room than the full-disk reserve holds
+        room = min(self._wal_reserve, db.reserve.size if db.reserve else self._wal_reserve)
+        db.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // db.page_size // 2)}")
         self._load_dictionaries()
         self.dead_letters = DeadLetterBox(db, self.codecs, clock)
 
@@ -105,8 +111,9 @@ class QueueStore:
         connection.execute(f"PRAGMA synchronous = {'FULL' if sync == 'full' else 'NORMAL'}")
         connection.execute(f"PRAGMA cache_size = -{CACHE_KIB}")
         migrate(connection)
+        reserve = SpaceReserve.sized_for(path, wal_reserve((limits or QueueLimits()).max_bytes))
         store = cls(
-            Database(connection, path),
+            Database(connection, path, reserve),
             limits=limits or QueueLimits(),
             compression=compression,
             clock=clock,
@@ -118,11 +125,15 @@ class QueueStore:
                     "INSERT OR REPLACE INTO meta(key, value) VALUES ('quarantined', ?)",
                     (str(quarantined),),
                 )
+        store.take_back_orphaned_leases()
+        sweep_dead_owners(path)
+        reserve.restore()
         store.warn_if_disk_smaller_than_cap()
         return store
 
     def close(self) -> None:
         self._db.close()
+        self._owner.close()
 
     def now(self) -> float:
         """The store's clock (unix seconds); injectable for tests of TTL and leases."""
@@ -202,6 +213,9 @@ class QueueStore:
                 with contextlib.suppress(QueueError):
                     self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
 
+    # Making room for new events never touches the full-disk reserve: it is kept for
+    # what lets the queue drain (claims, acks), or new events would take it at once.
+
     def _evict_oldest(self, count: int, reason: str) -> bool:
         try:
             with self._db.transaction() as cursor:
@@ -225,29 +239,26 @@ class QueueStore:
         JSON (but always one, however large). None when there is nothing to send."""
         if self._db.counter("depth") == 0:
             return None
+        batch = self._claim(max_events, max_bytes)
+        if batch is None and time.monotonic() >= self._next_orphan_check:
+            # everything left is claimed: by a live sender, or by one that died
+            self._next_orphan_check = time.monotonic() + ORPHAN_CHECK_S
+            if self.take_back_orphaned_leases():
+                batch = self._claim(max_events, max_bytes)
+        return batch
+
+    def _claim(self, max_events: int, max_bytes: int) -> Batch | None:
         now = self._clock()
-        with self._db.transaction() as cursor:
-            rows: list[Any] = []
-            for low, high in leases.free_ranges(cursor, now):
-                rows = cursor.execute(
-                    "SELECT id, event_id, codec, dict_id, json_size, body FROM events "
-                    "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
-                    (low, high, max_events),
-                ).fetchall()
-                if rows:
-                    break
-            total, keep = 0, 0
-            for _, _, _, _, json_size, _ in rows:
-                if keep and total + json_size > max_bytes:
-                    break
-                total += json_size
-                keep += 1
-            rows = rows[:keep]
-            if not rows:
-                return None
-            # each claim its own token: releasing a stale claim never frees a newer one
-            token = f"{self._owner}:{next(self._claims)}"
-            leases.take(cursor, rows[0][0], rows[-1][0], token, now + self.lease_s)
+        # each claim its own token: releasing a stale claim never frees a newer one
+        token = f"{self._owner.token}:{next(self._claims)}"
+
+        rows = self._db.write(
+            lambda cursor: claims.lease_oldest(
+                cursor, max_events, max_bytes, token, now, now + self.lease_s
+            )
+        )
+        if not rows:
+            return None
         events = [
             QueuedEvent(row_id, event_id, self.codecs.decode(codec, dict_id, body))
             for row_id, event_id, codec, dict_id, _, body in rows
@@ -257,42 +268,34 @@ class QueueStore:
     def ack(self, batch: Batch, dead_letters: Sequence[DeadLetter] = ()) -> None:
         """PhyCloud has the batch: delete it, moving ``dead_letters`` aside first."""
         now = self._clock()
-        with self._db.transaction() as cursor:
-            rejected = 0  # those still queued: after a lease ran out, another may have them
-            for dead in dead_letters:
-                rejected += cursor.execute(
-                    "INSERT INTO dead_letters(event_id, queued_at, dead_at, reason, status_code, "
-                    "response, codec, dict_id, json_size, body) "
-                    "SELECT event_id, queued_at, ?, ?, ?, ?, codec, dict_id, json_size, body "
-                    "FROM events WHERE id = ?",
-                    (
-                        now,
-                        dead.reason,
-                        dead.status_code,
-                        (dead.response or "")[:4096] or None,
-                        dead.queue_id,
-                    ),
-                ).rowcount
-            deleted = delete_range(cursor, batch.first_id, batch.last_id)
-            leases.give_back(cursor, batch.first_id, batch.owner)
-            bump_counters(
-                cursor,
-                acked_total=max(0, deleted - rejected),
-                dead_letters=rejected,
-                **{"drop:rejected": rejected},
+
+        self._db.write(lambda cursor: claims.delete_accepted(cursor, batch, dead_letters, now))
+
+    def take_back_orphaned_leases(self) -> int:
+        """Free the events claimed by processes that died (killed, crashed, a container
+        removed) without waiting for their leases to run out; the count of leases."""
+        now = self._clock()
+        mine = self._owner.token
+        dead = self._db.write(lambda cursor: claims.take_back_dead(cursor, self.path, mine, now))
+        if dead:
+            log.warning(
+                "queue %s: took back the claims of %d process(es) that died while sending",
+                self.path,
+                len(dead),
             )
+        return len(dead)
 
     def release(self, batch: Batch) -> None:
         """Give the batch back unsent: its events are claimable again at once."""
-        with self._db.transaction() as cursor:
-            leases.give_back(cursor, batch.first_id, batch.owner)
+        self._db.write(lambda cursor: leases.give_back(cursor, batch.first_id, batch.owner))
 
     def renew(self, batch: Batch) -> bool:
         """Extend the lease while a send is still retrying; False if it had expired
         (another sender may have the events now: send them anyway, PhyCloud dedupes)."""
-        now = self._clock()
-        with self._db.transaction() as cursor:
-            return leases.extend(cursor, batch.first_id, batch.owner, now, now + self.lease_s)
+        now, until = self._clock(), self._clock() + self.lease_s
+        return self._db.write(
+            lambda cursor: leases.extend(cursor, batch.first_id, batch.owner, now, until)
+        )
 
     # ------------------------------------------------------------------ upkeep
 
@@ -312,9 +315,13 @@ class QueueStore:
         return max(0, before - self.file_bytes())
 
     def maintain(self) -> None:
-        """Periodic upkeep: TTL expiry, then space reclaim."""
+        """Periodic upkeep: TTL expiry, space reclaim, and the full-disk reserve made
+        again once the disk has room."""
         self.expire()
         self.reclaim_space()
+        reserve = self._db.reserve
+        if reserve is not None and not reserve.held() and reserve.restore():
+            log.info("queue %s: the disk has room again; the reserve is back", self.path)
 
     # ------------------------------------------------------------------ state
 

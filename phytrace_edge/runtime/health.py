@@ -65,6 +65,13 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         problems.append(
             f"PhyCloud refuses the API key (HTTP {sender['last_status']}) - check PHYCLOUD_API_KEY"
         )
+    queue_error_at = sender.get("last_queue_error_at") or 0
+    if (
+        running
+        and queue_error_at > (last_success or 0)
+        and now - queue_error_at < limits.stale_after_s
+    ):
+        problems.append(f"the sender cannot use the queue: {sender.get('last_queue_error')}")
     fill = stats.file_bytes / limits.queue_max_bytes if limits.queue_max_bytes else 0.0
     if fill > limits.queue_warn_fraction:
         problems.append(f"queue is {fill:.0%} of QUEUE_MAX_BYTES")
@@ -109,6 +116,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         "retries": sender.get("retries", 0),
         "batches_split": sender.get("batches_split", 0),
         "auth_failures": sender.get("auth_failures", 0),
+        "queue_errors": sender.get("queue_errors", 0),
         "events_built": service.get("events_built", 0),
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
         "stages": stages,

@@ -89,6 +89,11 @@ class BridgeService:
         self._on_event = on_event
         self._rates = Rates()
         self._metrics: Any = None
+        self._on_stopped: list[Callable[[], None]] = []
+
+    def on_stopped(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` once the service has stopped (its queue closed)."""
+        self._on_stopped.append(callback)
 
     def _emit(self, event: dict[str, Any]) -> None:
         self.events_built += 1
@@ -136,7 +141,10 @@ class BridgeService:
         start(ingest)
         if not self.source.keeps_time:
             start(Worker("sampler", lambda beat: self.sampler.run(ingest.stop, beat), ingest.stop))
-        self.heartbeat(running=True)
+        try:
+            self.heartbeat(running=True)
+        except QueueError as exc:  # a full disk must not keep the bridge from starting
+            log.warning("heartbeat not written: %s", exc)
         if self.options.metrics_port:
             from phytrace_edge.runtime.metrics import serve_metrics
 
@@ -259,7 +267,14 @@ class BridgeService:
         if self._metrics is not None:
             self._metrics.shutdown()
         self.sender.transport.close()
-        self.heartbeat(running=False)
-        left = self.store_depth_at_stop = self.store.counter("depth")
+        try:  # the final figures: events_built and the counters agree at a clean stop
+            self.heartbeat(running=False)
+            left = self.store_depth_at_stop = self.store.counter("depth")
+        except QueueError as exc:
+            log.error("could not record the stop in the queue: %s", exc)
+            left = -1
         self.store.close()
-        log.info("stopped; %d event(s) left in the queue for next time", left)
+        for callback in self._on_stopped:
+            callback()
+        if left >= 0:
+            log.info("stopped; %d event(s) left in the queue for next time", left)

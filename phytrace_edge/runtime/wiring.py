@@ -164,17 +164,26 @@ def build_service(
 
     from phytrace_edge.builder.builder import UDMBuilder
     from phytrace_edge.ingest.sources.registry import create_source
+    from phytrace_edge.queue.ownership import ServiceLock
     from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
     from phytrace_edge.runtime.service import BridgeService
     from phytrace_edge.ship.sender import Sender
 
     warn_if_not_on_a_volume(Path(queue_path(s)), env)
     source = create_source(source_options(s, env, ros_args))
-    store = open_queue(s)
+    lock = ServiceLock(Path(queue_path(s)))  # one `run` per queue file
+    try:
+        store = open_queue(s)
+    except BaseException:
+        lock.release()
+        raise
     try:
         sender = Sender(store, transport or http_transport(s), send_policy(s))
         builder = UDMBuilder(builder_options(s), clock=source.clock)
-        return BridgeService(service_options(s), store, sender, source, builder, on_event)
+        service = BridgeService(service_options(s), store, sender, source, builder, on_event)
     except BaseException:
         store.close()
+        lock.release()
         raise
+    service.on_stopped(lock.release)
+    return service

@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 
 RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same time spreads
 POLL_INTERVAL_S = 0.25
+QUEUE_RETRY_S = 1.0
 BEAT_S = 1.0
 LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
 
@@ -62,6 +63,9 @@ class SendStats:
     last_error: str | None = None
     last_error_at: float | None = None
     last_status: int | None = None
+    queue_errors: int = 0
+    last_queue_error: str | None = None
+    last_queue_error_at: float | None = None
     latency_buckets: list[int] = field(default_factory=lambda: [0] * len(LATENCY_BUCKETS_S))
     latency_count: int = 0
     latency_sum_s: float = 0.0
@@ -128,6 +132,9 @@ class Sender:
                 sent = self.send_next_batch(flush=self.flushing.is_set())
             except Stopped:
                 return
+            except QueueError as exc:  # busy, full: the queue will be usable again
+                self._queue_trouble(exc)
+                continue
             beat()
             if not sent:
                 self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
@@ -144,6 +151,9 @@ class Sender:
                     sent = self.send_next_batch(flush=True)
                 except Stopped:
                     break
+                except QueueError as exc:
+                    self._queue_trouble(exc)
+                    continue
                 if progress is not None and sent:
                     progress(sent)
                 if not sent and self.store.counter("depth") == 0:
@@ -153,6 +163,20 @@ class Sender:
             return self.store.counter("depth") == 0
         finally:
             self._deadline = None
+
+    def _queue_trouble(self, exc: QueueError) -> None:
+        """The queue could not be read or written this time (another process holds the
+        write lock, the disk is full): count it, say so now and then, and wait a bit."""
+        self.stats.queue_errors += 1
+        self.stats.last_queue_error = str(exc)
+        self.stats.last_queue_error_at = self._clock()
+        if self.stats.queue_errors in (1, 10) or self.stats.queue_errors % 100 == 0:
+            log.error("cannot use the queue to send (%s); trying again", exc)
+        self._sleep_quietly(QUEUE_RETRY_S)
+
+    def _sleep_quietly(self, seconds: float) -> None:
+        with contextlib.suppress(Stopped):
+            self._sleep(seconds)
 
     def _past_deadline(self) -> bool:
         return self._deadline is not None and time.monotonic() >= self._deadline
@@ -268,10 +292,7 @@ class Sender:
             if exc.status in (401, 403):
                 self.stats.auth_failures += 1
             log.error(
-                "%s; keeping %d queued event(s), retrying in %.0f s",
-                exc,
-                self.store.counter("depth"),
-                state.upcoming_sleep,
+                "%s; keeping the queued events, retrying in %.0f s", exc, state.upcoming_sleep
             )
         elif state.attempt_number == 1 or state.attempt_number % 10 == 0:
             log.warning(
@@ -280,7 +301,8 @@ class Sender:
                 state.attempt_number,
                 state.upcoming_sleep,
             )
-        self.store.renew(batch)
+        with contextlib.suppress(QueueError):  # a lease that runs out only means a resend
+            self.store.renew(batch)
 
     def _record_success(self, events: int, size: int, status: int) -> None:
         if 200 <= status < 300:

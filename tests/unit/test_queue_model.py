@@ -221,7 +221,8 @@ class QueueAccounting(RuleBasedStateMachine):
     @rule(mid_transaction=st.booleans())
     def crash_and_reopen(self, mid_transaction: bool) -> None:
         """Power is cut: the files as they are on disk now become the queue. Mid
-        transaction, an uncommitted put is in the WAL of the copy, and must vanish."""
+        transaction, an uncommitted put is in the WAL of the copy, and must vanish. The
+        process that held the claims is gone: the new store takes them back."""
         self.generation += 1
         copy = self.dir / f"q{self.generation}.db"
         path = self.store.path
@@ -245,6 +246,8 @@ class QueueAccounting(RuleBasedStateMachine):
             self._copy(path, copy)
         self.store.close()
         self.store = self._open(copy)
+        for claim in self.open_claims:  # their owner died: its claims are taken back at once
+            claim.expires_at = float("-inf")
 
     @staticmethod
     def _copy(path: Path, copy: Path) -> None:

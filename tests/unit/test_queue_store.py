@@ -410,7 +410,8 @@ def test_a_drained_backlog_gives_its_space_back(open_store) -> None:
     while (batch := store.claim_batch(500, 4 * MIB)) is not None:
         store.ack(batch)
     store.maintain()
-    assert store.file_bytes() < peak / 20
+    reserve = Path(f"{store.path}-reserve").stat().st_size  # kept for a full disk
+    assert store.file_bytes() - reserve < (peak - reserve) / 20
 
 
 def test_concurrent_put_and_claim_threads_lose_nothing(open_store) -> None:
