@@ -13,6 +13,8 @@ that line and exits with the error's ``exit_code``; it never prints a traceback 
     │   └── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
     └── SendError            a batch did not reach PhyCloud this time
         └── TransientSendError   retry it: 408/425/429/5xx, timeouts, connection errors
+            ├── UnexpectedAnswerError  retry it: a 2xx that is not PhyCloud's answer
+            │                          (a captive portal), so the batch is not deleted
             └── EndpointRefusedError  retry it, but slowly and loudly: 401/403 (key),
                                       415 (encoding), other unexpected answers (config)
 
@@ -88,6 +90,10 @@ class TransientSendError(SendError):
         super().__init__(message)
         self.status = status
         self.retry_after = retry_after
+
+
+class UnexpectedAnswerError(TransientSendError):
+    """A 2xx whose body is not PhyCloud's answer: the batch was not delivered."""
 
 
 class EndpointRefusedError(TransientSendError):

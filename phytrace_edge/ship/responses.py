@@ -14,7 +14,7 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.errors import EndpointRefusedError, TransientSendError
+from phytrace_edge.errors import EndpointRefusedError, TransientSendError, UnexpectedAnswerError
 
 RETRY_AFTER_MAX_S = 3600.0
 RETRYABLE = {408, 425, 429}
@@ -80,13 +80,35 @@ def _text(body: bytes) -> str:
     return body[:4096].decode("utf-8", "replace")
 
 
+def is_contract_answer(document: dict[str, Any]) -> bool:
+    """Whether a 2xx body is PhyCloud's answer (docs/phycloud-api.md): a JSON object with
+    the count of events ``accepted``. A captive portal's page, a proxy's banner or an
+    empty 200 is not, and must not make the bridge delete a batch."""
+    accepted = document.get("accepted")
+    rejected = document.get("rejected", [])
+    return (
+        isinstance(accepted, int)
+        and not isinstance(accepted, bool)
+        and accepted >= 0
+        and isinstance(rejected, list)
+    )
+
+
 def classify(reply: Reply, batch_size: int, now: float) -> Outcome:
     """The outcome of ``reply`` for a batch of ``batch_size`` events, or raise the
     error to retry on."""
     status = reply.status
     if 200 <= status < 300:
+        document = _document(reply.body)
+        if not is_contract_answer(document):
+            kind = reply.headers.get("content-type", "no content type").split(";")[0]
+            raise UnexpectedAnswerError(
+                f"HTTP {status} without PhyCloud's answer ({kind}, {len(reply.body)} bytes) - "
+                "a captive portal or proxy in the way? Kept the batch",
+                status,
+            )
         rejected = {}
-        for item in _document(reply.body).get("rejected") or []:
+        for item in document.get("rejected") or []:
             index = item.get("index") if isinstance(item, dict) else None
             if isinstance(index, int) and 0 <= index < batch_size:
                 rejected[index] = str(item.get("reason", "rejected"))[:512]

@@ -30,7 +30,12 @@ from typing import Any
 
 from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
 
-from phytrace_edge.errors import EndpointRefusedError, QueueError, TransientSendError
+from phytrace_edge.errors import (
+    EndpointRefusedError,
+    QueueError,
+    TransientSendError,
+    UnexpectedAnswerError,
+)
 from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.options import SendPolicy
@@ -59,6 +64,7 @@ class SendStats:
     batches_split: int = 0
     dead_lettered: int = 0
     auth_failures: int = 0
+    unexpected_answers: int = 0
     last_success_at: float | None = None
     last_error: str | None = None
     last_error_at: float | None = None
@@ -116,8 +122,9 @@ class Sender:
         self._deadline: float | None = None
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
         self._encoder = BodyEncoder(policy.http_compression)
+        # full jitter between RETRY_MIN_S and the exponential bound (never a tight loop)
         self._backoff = wait_random_exponential(
-            multiplier=policy.retry_min_s, max=policy.retry_max_s
+            multiplier=policy.retry_min_s, max=policy.retry_max_s, min=policy.retry_min_s
         )
 
     # ------------------------------------------------------------------ loops
@@ -265,7 +272,10 @@ class Sender:
         if isinstance(exc, EndpointRefusedError):
             return self.policy.retry_max_s
         if isinstance(exc, TransientSendError) and exc.retry_after is not None:
-            return exc.retry_after * (1 + RETRY_AFTER_JITTER * self._rng.random())
+            # never sooner than RETRY_MIN_S: "Retry-After: 0", a negative number or a
+            # date in the past (a robot whose clock runs ahead) would make a tight loop
+            wait = max(exc.retry_after, self.policy.retry_min_s)
+            return wait * (1 + RETRY_AFTER_JITTER * self._rng.random())
         return float(self._backoff(state))
 
     def _wait_beating(self, seconds: float) -> None:
@@ -288,6 +298,8 @@ class Sender:
         self.stats.last_error = str(exc)
         self.stats.last_error_at = self._clock()
         self.stats.last_status = getattr(exc, "status", None)
+        if isinstance(exc, UnexpectedAnswerError):
+            self.stats.unexpected_answers += 1
         if isinstance(exc, EndpointRefusedError):
             if exc.status in (401, 403):
                 self.stats.auth_failures += 1
