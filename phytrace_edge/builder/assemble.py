@@ -24,6 +24,16 @@ from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 
 EVENT_TYPE_PERIODIC = "telemetry.periodic"
+DOMAINS = (
+    "location",
+    "motion",
+    "power",
+    "operational",
+    "navigation",
+    "perception",
+    "actuators",
+    "payload",
+)
 MOVING_SPEED_MPS = 0.05
 ROTATING_RATE_DPS = 2.0
 EPOCH_2000_S = 946_684_800.0

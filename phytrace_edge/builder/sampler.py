@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.builder.builder import UDMBuilder
 
 Event = dict[str, Any]
@@ -39,14 +40,21 @@ class Sampler:
         self._before_tick = before_tick
         self._monotonic = monotonic
         self.ticks = 0
+        self.empty_ticks = 0
 
-    def tick(self, captured_at_s: float | None = None) -> None:
+    def tick(self, captured_at_s: float | None = None) -> bool:
         """Build and emit the event of this tick; ``captured_at_s`` overrides the wall
-        clock (a replay's timeline)."""
+        clock (a replay's timeline). An event with no domain (nothing fresh was heard)
+        is not worth sending: it is not emitted, and the tick returns False."""
         if self._before_tick is not None:
             self._before_tick()
         self.ticks += 1
-        self._emit(self.builder.build_event(captured_at_s))
+        event = self.builder.build_event(captured_at_s)
+        if not any(domain in event for domain in DOMAINS):
+            self.empty_ticks += 1
+            return False
+        self._emit(event)
+        return True
 
     def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:
         """Tick every period until ``stop``. Ticks are scheduled on the monotonic clock

@@ -105,7 +105,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
             "oldest_age_s": oldest_age,
             "quarantined": stats.quarantined,
         },
-        "drops": stats.drops,
+        "drops": _drops(stats.drops, service),
         "dead_letters": stats.dead_letters,
         "queued_total": stats.queued_total,
         "sent_total": stats.acked_total,
@@ -122,6 +122,15 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         "stages": stages,
         "topics": service.get("topics", {}),
     }
+
+
+def _drops(queue_drops: dict[str, int], service: dict[str, Any]) -> dict[str, int]:
+    """Drops by reason: the queue's, and the service's hand-off to it (the disk stalled
+    so long that the writer fell HANDOFF_MAX_EVENTS behind)."""
+    drops = dict(queue_drops)
+    if service.get("writer_dropped"):
+        drops["writer_backlog"] = service["writer_dropped"]
+    return drops
 
 
 def _stage_problems(stages: dict[str, Any], stale_after_s: float) -> list[str]:

@@ -100,7 +100,7 @@ class BridgeService:
         check_event(event, log)  # a violation is logged; the event is still kept
         if self._on_event is not None:
             self._on_event(event)
-        self.writer.put(event)
+        self.writer.put(event, wait=self.source.keeps_time)  # a bag waits for the disk
 
     def summary(self) -> str:
         o = self.options

@@ -3,8 +3,10 @@
 The tick must never wait for the disk: an fsync on slow robot flash can take tens of
 milliseconds. The tick hands the event over in memory (microseconds); the writer's
 loop puts whatever has accumulated in one transaction (group commit). The hand-off is
-bounded: if the disk stalls so long that it fills, the newest events are counted as
-dropped (``writer_backlog``) and logged, rather than memory growing.
+bounded: if the disk stalls so long that it fills, a live input's newest events are
+counted as dropped (``writer_backlog``, shown by ``status``) and logged, rather than
+memory growing. A replayed bag waits instead (``put(wait=True)``): it can go no faster
+than the disk, and nothing of it need be lost.
 """
 
 from __future__ import annotations
@@ -34,13 +36,17 @@ class QueueWriter:
         self.stop = threading.Event()
         self._pending: deque[dict[str, Any]] = deque()
         self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)
         self._wake = threading.Event()
         self._retry_pause = threading.Event()  # never set: a plain interruptible pause
         self.events_dropped = 0
 
-    def put(self, event: dict[str, Any]) -> None:
-        """Hand an event over; never blocks on disk."""
+    def put(self, event: dict[str, Any], wait: bool = False) -> None:
+        """Hand an event over; never blocks on disk unless asked to ``wait`` for room
+        (it then returns early only when the writer is stopping)."""
         with self._lock:
+            while wait and len(self._pending) >= HANDOFF_MAX_EVENTS and not self.stop.is_set():
+                self._room.wait(RETRY_S)
             if len(self._pending) >= HANDOFF_MAX_EVENTS:
                 self.events_dropped += 1
                 if self.events_dropped in (1, 100) or self.events_dropped % 10_000 == 0:
@@ -88,4 +94,5 @@ class QueueWriter:
         with self._lock:
             for _ in group:
                 self._pending.popleft()
+            self._room.notify_all()
         return True

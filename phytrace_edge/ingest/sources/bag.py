@@ -26,6 +26,7 @@ from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 log = logging.getLogger(__name__)
 
 NS = 1_000_000_000
+GAP_S = 30.0  # a pause in the bag longer than this is skipped, not ticked through
 
 
 class BagClock:
@@ -47,6 +48,9 @@ class ReplaySummary:
     messages: Counter[str] = field(default_factory=Counter)
     skipped: Counter[str] = field(default_factory=Counter)
     events: int = 0
+    gaps: int = 0
+    longest_gap_s: float = 0.0
+    stopped: bool = False
     error: str | None = None
 
     def describe(self) -> str:
@@ -56,6 +60,10 @@ class ReplaySummary:
             f"replayed {self.path}: {sum(self.messages.values())} messages ({read}); "
             f"{self.events} events built; skipped: {skipped}"
         )
+        if self.gaps:
+            text += f"; {self.gaps} gap(s) skipped, the longest {self.longest_gap_s:.0f} s"
+        if self.stopped:
+            text += "; stopped before the end"
         return text + (f"; stopped early: {self.error}" if self.error else "")
 
 
@@ -70,11 +78,14 @@ def open_reader(path: str) -> Any:
         ) from None
     if not Path(path).exists():
         raise ConfigError(f"BRIDGE_INPUT='bag:{path}': no such file or directory")
-    reader = AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY))
     try:
+        reader = AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY))
         reader.open()
-    except Exception as exc:  # rosbags raises its own errors for unreadable bags
-        raise ConfigError(f"BRIDGE_INPUT='bag:{path}': cannot read the bag ({exc})") from None
+    except Exception as exc:  # rosbags raises its own errors for what is not a bag
+        reason = str(exc).splitlines()[0][:200] if str(exc) else type(exc).__name__
+        raise ConfigError(
+            f"BRIDGE_INPUT='bag:{path}': not a readable rosbag2 or ROS 1 bag ({reason})"
+        ) from None
     return reader
 
 
@@ -101,17 +112,26 @@ def replay(
         else:
             summary.skipped[f"{connection.topic} ({connection.msgtype})"] += connection.msgcount
     period_ns = int(feed.sample_period_s * NS)
+    gap_ns = int(GAP_S * NS)
     started = time.monotonic()
     first_ns: int | None = None
+    last_ns = 0
     next_tick_ns = 0
 
     def ticks_until(limit_ns: int) -> None:
+        """Tick every period up to ``limit_ns``; once a tick finds nothing fresh, no
+        tick before the next message would, so the rest are skipped."""
         nonlocal next_tick_ns
-        while next_tick_ns <= limit_ns:
+        while next_tick_ns <= limit_ns and not stop.is_set():
             clock.now_s = next_tick_ns / NS
-            feed.tick(clock.now_s)
-            summary.events += 1
+            built = feed.tick(clock.now_s)
             next_tick_ns += period_ns
+            if not built:
+                next_tick_ns += max(0, limit_ns - next_tick_ns) // period_ns * period_ns
+                if next_tick_ns <= limit_ns:
+                    next_tick_ns += period_ns
+                return
+            summary.events += 1
 
     try:
         try:
@@ -119,19 +139,27 @@ def replay(
                 if stop.is_set():
                     break
                 if first_ns is None:
-                    first_ns, next_tick_ns = timestamp, timestamp + period_ns
+                    first_ns, last_ns, next_tick_ns = timestamp, timestamp, timestamp + period_ns
+                if timestamp - last_ns > gap_ns:  # the robot was off, or recording paused
+                    ticks_until(last_ns + gap_ns)
+                    next_tick_ns = max(next_tick_ns, timestamp)  # ticks go on from here
+                    first_ns += timestamp - last_ns - gap_ns  # so does the replay's pace
+                    summary.gaps += 1
+                    summary.longest_gap_s = max(summary.longest_gap_s, (timestamp - last_ns) / NS)
                 if rate > 0:  # keep to the recorded pace, scaled
                     due = started + (timestamp - first_ns) / NS / rate
                     if stop.wait(max(0.0, due - time.monotonic())):
                         break
                 ticks_until(timestamp)
                 clock.now_s = timestamp / NS
+                last_ns = max(last_ns, timestamp)
                 name = canonical[connection.topic]
                 summary.messages[name] += 1
                 feed.on_message(name, reader.deserialize(raw, connection.msgtype))
                 beat()
             if first_ns is not None and not stop.is_set():
                 ticks_until(int(clock.now_s * NS))
+            summary.stopped = stop.is_set()
         finally:
             reader.close()
     except Exception as exc:  # a truncated or damaged bag: keep what was read

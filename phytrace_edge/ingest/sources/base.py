@@ -39,10 +39,11 @@ class SourceOptions:
 @dataclass(frozen=True)
 class Feed:
     """Where a source delivers: each message, and (for sources that keep their own
-    time) each sample tick with its ``captured_at`` (None = the wall clock)."""
+    time) each sample tick with its ``captured_at`` (None = the wall clock); a tick
+    says whether it built an event (False: nothing fresh to report)."""
 
     on_message: Callable[[str, Any], None]
-    tick: Callable[[float | None], None]
+    tick: Callable[[float | None], bool]
     sample_period_s: float
 
 
