@@ -29,13 +29,6 @@ COMMANDS = {
     for name in ("run", "status", "drain", "config", "sim", "dead-letters", "stub")
 }
 DESCRIPTION = "PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud."
-HELP_WIDTH = 100
-
-
-def _formatter(prog: str) -> argparse.HelpFormatter:
-    # a width of our own: argparse would import shutil to ask the terminal for one,
-    # which costs the start of every command (status runs every 30 s in a container)
-    return argparse.HelpFormatter(prog, width=HELP_WIDTH)
 
 
 def _configure(parser: argparse.ArgumentParser, command: Any) -> argparse.ArgumentParser:
@@ -53,25 +46,20 @@ def command_module(name: str) -> Any:
 def command_parser(name: str) -> argparse.ArgumentParser:
     """The parser of one command, as ``phytrace-edge NAME`` (all that one run needs)."""
     command = command_module(name)
-    parser = argparse.ArgumentParser(
-        prog=f"phytrace-edge {name}", description=command.HELP, formatter_class=_formatter
-    )
+    parser = common.Parser(prog=f"phytrace-edge {name}", description=command.HELP)
     return _configure(parser, command)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of ``phytrace-edge`` with every command (for --help and the docs)."""
-    parser = argparse.ArgumentParser(
-        prog="phytrace-edge", description=DESCRIPTION, formatter_class=_formatter
-    )
+    parser = common.Parser(prog="phytrace-edge", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"phytrace-edge {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=common.Parser
+    )
     for name in COMMANDS:
         command = command_module(name)
-        sub = commands.add_parser(
-            name, help=command.HELP, description=command.HELP, formatter_class=_formatter
-        )
-        _configure(sub, command)
+        _configure(commands.add_parser(name, help=command.HELP, description=command.HELP), command)
     return parser
 
 

@@ -11,9 +11,44 @@ from phytrace_edge.units import format_bytes
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
 if TYPE_CHECKING:
-    from typing import Any
+    from collections.abc import Callable
+    from typing import Any, NoReturn
 
 SETTING_PREFIX = "setting_"
+HELP_WIDTH = 100
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, with a mistake reported as one line (argparse prints the usage first,
+    which wraps to many lines) and a help width of our own (argparse would import
+    shutil to ask the terminal, which costs every command's start)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _formatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _formatter(prog: str) -> argparse.HelpFormatter:
+    return argparse.HelpFormatter(prog, width=HELP_WIDTH)
+
+
+def checked(parse: Callable[[Any], Any], what: str) -> Callable[[str], Any]:
+    """An argparse ``type`` from one of the settings' parsers: the same rules, and the
+    same one-line message, for a command's own arguments."""
+
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} is not {exc}") from None
+
+    convert.__name__ = what  # argparse names the type in some messages
+    return convert
+
+
 # flags that keep another name working: DESIGN.md and the docs say --input
 FLAG_ALIASES = {"bridge_input": ("--input",)}
 

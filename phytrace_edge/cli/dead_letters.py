@@ -5,8 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from phytrace_edge.cli.common import checked
+from phytrace_edge.config.parsers import int_between, non_negative_float, path_value
 from phytrace_edge.errors import EXIT_OK, ConfigError
 from phytrace_edge.runtime import wiring
+
+ID = int_between(1, 2**63 - 1)
+LIMIT = int_between(1, 10**6)
+DAYS = non_negative_float(36500)
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
 if TYPE_CHECKING:
@@ -19,10 +25,22 @@ HELP = "list, export, requeue or purge events PhyCloud rejected"
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("action", choices=["list", "export", "requeue", "purge"])
-    parser.add_argument("ids", nargs="*", type=int, help="dead letter ids (default: all)")
-    parser.add_argument("--limit", type=int, default=100, help="list at most this many")
-    parser.add_argument("--output", "-o", default="-", help="export to this file (- = stdout)")
-    parser.add_argument("--older-than-days", type=float, help="purge only those older")
+    parser.add_argument(
+        "ids", nargs="*", type=checked(ID, "id"), help="dead letter ids (default: all)"
+    )
+    parser.add_argument(
+        "--limit", type=checked(LIMIT, "limit"), default=100, help="list at most this many"
+    )
+    parser.add_argument(
+        "--output",
+        "-o",
+        type=checked(path_value, "path"),
+        default="-",
+        help="export to this file (- = stdout)",
+    )
+    parser.add_argument(
+        "--older-than-days", type=checked(DAYS, "days"), help="purge only those older"
+    )
     parser.add_argument("--all", action="store_true", help="purge all")
 
 
@@ -47,8 +65,12 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
             if args.output == "-":
                 written = box.export(sys.stdout.buffer)
             else:
-                with open(args.output, "wb") as out:  # noqa: PTH123 - a binary stream
-                    written = box.export(out)
+                try:
+                    with open(args.output, "wb") as out:  # noqa: PTH123 - a binary stream
+                        written = box.export(out)
+                except OSError as exc:
+                    message = f"--output {args.output}: cannot write ({exc.strerror})"
+                    raise ConfigError(message) from None
             print(f"exported {written} dead letter(s)", file=sys.stderr)
         elif args.action == "requeue":
             print(f"requeued {box.requeue(ids)} dead letter(s) at the end of the queue")

@@ -6,6 +6,8 @@ import argparse
 import sys
 import time
 
+from phytrace_edge.cli.common import checked
+from phytrace_edge.config.parsers import positive_float
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
@@ -20,7 +22,11 @@ HELP = "send the whole backlog now, with a progress bar"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--timeout", type=float, help="give up after this many seconds")
+    parser.add_argument(
+        "--timeout",
+        type=checked(positive_float(10**7), "seconds"),
+        help="give up after this many seconds",
+    )
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from phytrace_edge.cli.common import print_json
+from phytrace_edge.cli.common import checked, print_json
+from phytrace_edge.config.parsers import int_between, path_value
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
@@ -18,13 +19,22 @@ HELP = "run the simulated delivery robot through the bridge"
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--ticks", type=int, default=100, help="robot cycles at 10 Hz (default 100)"
+        "--ticks",
+        type=checked(int_between(0, 10**7), "ticks"),
+        default=100,
+        help="robot cycles at 10 Hz (default 100)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="random seed of the simulated world")
+    parser.add_argument(
+        "--seed",
+        type=checked(int_between(0, 2**32 - 1), "seed"),
+        default=0,
+        help="random seed of the simulated world",
+    )
     parser.add_argument("--realtime", action="store_true", help="run at wall-clock pace")
     parser.add_argument(
         "--record",
         metavar="PATH",
+        type=checked(path_value, "path"),
         help="record the robot's topics to a rosbag2 at PATH instead (needs [bag])",
     )
     parser.add_argument(

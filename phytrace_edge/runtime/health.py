@@ -120,8 +120,26 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         "events_built": service.get("events_built", 0),
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
         "stages": stages,
-        "topics": service.get("topics", {}),
+        "topics": _topics_now(service.get("topics", {}), heartbeat_age, running),
     }
+
+
+def _topics_now(
+    topics: dict[str, Any], heartbeat_age: float | None, running: bool
+) -> dict[str, Any]:
+    """Per-topic figures as of now: when the service is not running, the ages of the
+    last messages count from now (not from its last heartbeat), and nothing is heard."""
+    if running or heartbeat_age is None:
+        return topics
+    now = {}
+    for topic, figures in topics.items():
+        age = figures.get("last_seen_age_s")
+        now[topic] = {
+            **figures,
+            "rate_hz": 0.0,
+            "last_seen_age_s": None if age is None else round(age + heartbeat_age, 1),
+        }
+    return now
 
 
 def _drops(queue_drops: dict[str, int], service: dict[str, Any]) -> dict[str, int]:

@@ -171,7 +171,8 @@ class HttpTransport:
         self._deadline.until = time.monotonic() + self._timeout_s
         try:
             with self._client.stream("POST", self.url, content=body, headers=dict(headers)) as r:
-                return Reply(r.status_code, dict(r.headers), _read_at_most(r, MAX_REPLY_BYTES))
+                answer = _read_at_most(r, MAX_REPLY_BYTES)
+                return Reply(r.status_code, self._mask_headers(r.headers), self._mask(answer))
         except httpx.TimeoutException as exc:
             raise TransientSendError(
                 f"timeout: no complete answer within HTTP_TIMEOUT_S ({type(exc).__name__})"
@@ -185,6 +186,16 @@ class HttpTransport:
             raise TransientSendError(f"{type(exc).__name__}: {self._safe(exc)}") from exc
         finally:
             self._deadline.until = None
+
+    def _mask(self, body: bytes) -> bytes:
+        """An answer as it may be kept (a dead letter keeps PhyCloud's words): a server
+        that echoes the request's headers must not put the key into the queue."""
+        for form in self._key_forms:
+            body = body.replace(form.encode("utf-8", "replace"), b"***")
+        return body
+
+    def _mask_headers(self, headers: httpx.Headers) -> dict[str, str]:
+        return {name: redact(value, self._key_forms) for name, value in headers.items()}
 
     def _safe(self, exc: BaseException) -> str:
         """An exception's text as it may go into logs and status: the key never."""
