@@ -7,8 +7,10 @@ Waiting is always on a condition with a deadline, never a bare sleep.
 from __future__ import annotations
 
 import os
+import random
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -33,6 +35,23 @@ def wait_for(condition: Callable[[], Any], timeout: float, what: str, every: flo
         time.sleep(every)
 
 
+def free_port() -> int:
+    """A free port on 127.0.0.1 *below* the ephemeral range (32768 and up on Linux). A
+    client that keeps connecting to a port nobody listens on yet (a bridge retrying
+    while the stub is down) can be given that same port as its own source port, and
+    then connects to itself; a server port outside the ephemeral range rules that out."""
+    rng = random.Random()
+    for _ in range(200):
+        port = rng.randrange(20000, 32000)
+        with socket.socket() as sock:
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    raise AssertionError("no free port on 127.0.0.1 between 20000 and 32000")
+
+
 def python_env(**extra: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PHYCLOUD_", "QUEUE_"))}
     env.update(PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1", **extra)
@@ -44,7 +63,7 @@ class StubProcess:
 
     def __init__(self, db: Path, *args: str) -> None:
         self.db, self.args = db, args
-        self.port = 0
+        self.port = free_port()
         self.scheme = "https" if "--tls-cert" in args else "http"
         self.process: subprocess.Popen[str] | None = None
         self.log = db.with_suffix(".log")

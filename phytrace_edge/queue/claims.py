@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import sqlite3
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from phytrace_edge.queue import leases
 from phytrace_edge.queue.database import bump_counters
-from phytrace_edge.queue.ownership import is_alive
 from phytrace_edge.queue.records import Batch, DeadLetter
 from phytrace_edge.queue.rows import delete_range
 
@@ -71,10 +69,7 @@ def delete_accepted(
     )
 
 
-def take_back_dead(cursor: sqlite3.Cursor, queue_path: Path, mine: str, now: float) -> list[str]:
-    """Free the leases of owners that died (ownership.py); the dead owners' tokens."""
-    owners = leases.owner_tokens(cursor, now) - {mine}
-    dead = [token for token in owners if not is_alive(queue_path, token)]
-    for token in dead:
+def take_back(cursor: sqlite3.Cursor, dead_owners: list[str]) -> None:
+    """Free the leases of owners that died (``ownership.is_alive`` said so)."""
+    for token in dead_owners:
         leases.take_back(cursor, token)
-    return dead

@@ -156,11 +156,16 @@ def read_stats(path: str, now: float) -> QueueStats | None:
         raise QueueError(f"queue {path}: cannot read ({exc.strerror})") from None
     if not stat.S_ISREG(mode):
         raise QueueError(f"queue {path}: not a regular file - set QUEUE_PATH to the queue file")
-    uri = "file:" + os.path.abspath(path).replace("%", "%25").replace("?", "%3f").replace(
-        "#", "%23"
-    )
+    folder = os.path.dirname(os.path.abspath(path))
+    uri = "file:" + os.path.abspath(path).replace("%", "%25").replace("?", "%3f")
+    uri = uri.replace("#", "%23")
+    # A queue on a read-only volume (an SD card mounted ro to look at it) cannot get the
+    # shared-memory file WAL readers need: it is read as it is on disk, without a WAL.
+    # (statvfs tells a read-only mount; root may write anywhere else.)
+    read_only = os.statvfs(folder).f_flag & os.ST_RDONLY or not os.access(folder, os.W_OK)
+    options = "mode=ro&immutable=1" if read_only else "mode=ro"
     try:
-        connection = sqlite3.connect(f"{uri}?mode=ro", uri=True, timeout=READ_TIMEOUT_S)
+        connection = sqlite3.connect(f"{uri}?{options}", uri=True, timeout=READ_TIMEOUT_S)
         try:
             return stats_from(connection, path, now)
         finally:

@@ -41,12 +41,6 @@ def extend(cursor: sqlite3.Cursor, first_id: int, owner: str, now: float, until:
     return cursor.rowcount == 1
 
 
-def owner_tokens(cursor: sqlite3.Cursor, now: float) -> set[str]:
-    """The owners of live leases (a lease's owner is ``<owner token>:<claim number>``)."""
-    rows = cursor.execute("SELECT DISTINCT owner FROM leases WHERE expires_at > ?", (now,))
-    return {owner.split(":", 1)[0] for (owner,) in rows}
-
-
 def take_back(cursor: sqlite3.Cursor, owner_token: str) -> int:
     """Remove every lease of a dead owner; its events are claimable again at once."""
     cursor.execute(

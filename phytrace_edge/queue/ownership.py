@@ -32,7 +32,10 @@ class ServiceLock:
         try:
             self._fd: int | None = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
         except OSError as exc:
-            raise QueueError(f"queue {queue_path}: cannot lock it ({exc.strerror})") from None
+            raise QueueError(
+                f"queue {queue_path}: cannot lock it ({exc.strerror}) - the queue's folder "
+                "must be writable by the bridge"
+            ) from None
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -43,7 +43,7 @@ from phytrace_edge.queue.defaults import (
 from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.migrate import migrate
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.ownership import Owner, sweep_dead_owners
+from phytrace_edge.queue.ownership import Owner, is_alive, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult, QueuedEvent
 from phytrace_edge.queue.recovery import open_checked
 from phytrace_edge.queue.reserve import SpaceReserve
@@ -55,7 +55,7 @@ from phytrace_edge.units import format_bytes
 log = logging.getLogger(__name__)
 
 CACHE_KIB = 8000  # SQLite's page cache: 8 MiB, whatever the backlog
-ORPHAN_CHECK_S = 2.0
+FULL_LOG_EVERY_S = 60.0
 
 
 class QueueStore:
@@ -77,7 +77,8 @@ class QueueStore:
         self._clock = clock
         self._owner = Owner(db.path)
         self._claims = itertools.count(1)
-        self._next_orphan_check = 0.0
+        self._next_full_log = 0.0
+        self._refused_since_log = 0
         self.codecs = Codecs(compression)
         self._caps = Caps(limits, db.page_size)
         self._wal_reserve = wal_reserve(limits.max_bytes)
@@ -179,12 +180,16 @@ class QueueStore:
                 with contextlib.suppress(QueueFullError):
                     return self._insert(rows)
             self._count_drop("disk_full", len(rows))
-            log.error(
-                "queue %s: disk full, %d new event(s) dropped - free space on the volume or "
-                "lower QUEUE_MAX_BYTES",
-                self.path,
-                len(rows),
-            )
+            self._refused_since_log += len(rows)
+            if time.monotonic() >= self._next_full_log:  # once a minute, not per event
+                self._next_full_log = time.monotonic() + FULL_LOG_EVERY_S
+                log.error(
+                    "queue %s: disk full, %d new event(s) dropped since the last report - "
+                    "free space on the volume or lower QUEUE_MAX_BYTES",
+                    self.path,
+                    self._refused_since_log,
+                )
+                self._refused_since_log = 0
             return PutResult(0, len(rows))
 
     def _encode(self, event: dict[str, Any]) -> tuple[str, int, Encoded]:
@@ -240,11 +245,9 @@ class QueueStore:
         if self._db.counter("depth") == 0:
             return None
         batch = self._claim(max_events, max_bytes)
-        if batch is None and time.monotonic() >= self._next_orphan_check:
-            # everything left is claimed: by a live sender, or by one that died
-            self._next_orphan_check = time.monotonic() + ORPHAN_CHECK_S
-            if self.take_back_orphaned_leases():
-                batch = self._claim(max_events, max_bytes)
+        if batch is None and self.take_back_orphaned_leases():
+            # everything left was claimed, and some of it by a process that died
+            batch = self._claim(max_events, max_bytes)
         return batch
 
     def _claim(self, max_events: int, max_bytes: int) -> Batch | None:
@@ -275,8 +278,15 @@ class QueueStore:
         """Free the events claimed by processes that died (killed, crashed, a container
         removed) without waiting for their leases to run out; the count of leases."""
         now = self._clock()
-        mine = self._owner.token
-        dead = self._db.write(lambda cursor: claims.take_back_dead(cursor, self.path, mine, now))
+        owners = {
+            owner.split(":", 1)[0]
+            for (owner,) in self._db.read(
+                "SELECT DISTINCT owner FROM leases WHERE expires_at > ?", (now,)
+            )
+        }
+        dead = [t for t in owners - {self._owner.token} if not is_alive(self.path, t)]
+        if dead:  # a write only when there is something to take back
+            self._db.write(lambda cursor: claims.take_back(cursor, dead))
         if dead:
             log.warning(
                 "queue %s: took back the claims of %d process(es) that died while sending",

@@ -188,8 +188,9 @@ class BridgeService:
         return all(age <= self.options.stall_after_s for age in ages)
 
     def finished_input(self) -> Finished | None:
-        """What a finite input did, once it is done (a bag replay's summary)."""
-        return self.source.finished() if self.finished.is_set() else None
+        """What a finite input did, once it ended or was stopped (a bag replay's
+        summary); None for a live input."""
+        return self.source.finished()
 
     # ------------------------------------------------------------------ figures
 

@@ -6,7 +6,6 @@ observes it from outside, the way an operator or a health check would."""
 from __future__ import annotations
 
 import signal
-import socket
 import sqlite3
 import subprocess
 import sys
@@ -17,15 +16,9 @@ import httpx
 import orjson
 import pytest
 
-from tests.processes import BridgeProcess, python_env, wait_for
+from tests.processes import BridgeProcess, free_port, python_env, wait_for
 
 SECRET = "phk_live_never_print_me"
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def cli(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
@@ -100,6 +93,9 @@ def test_status_while_running_and_after_a_clean_stop(running, tmp_path: Path, st
     assert code == 3 and doc["running"] is False and doc["heartbeat_age_s"] is not None
     assert doc["queue"]["depth"] == 0, "SIGTERM flushes what was built"
     assert stub.stats()["unique"] == doc["sent_total"] == doc["queued_total"]
+    assert doc["events_built"] == doc["queued_total"]  # the final figures, written at stop
+    assert all(t["rate_hz"] == 0 for t in doc["topics"].values())  # nothing heard now
+    assert doc["topics"]["/odom"]["last_seen_age_s"] >= doc["heartbeat_age_s"]
     log = (tmp_path / "bridge.log").read_text()
     assert "stopped; 0 event(s) left" in log
     assert SECRET not in log + table.stdout + orjson.dumps(doc).decode()

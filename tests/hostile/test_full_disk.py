@@ -1,0 +1,124 @@
+"""A real full filesystem (a small tmpfs mounted for the test, so root only): the bridge
+keeps running while PhyCloud is down and the disk fills, counts every event it could not
+keep, survives a restart on the full disk, and drains by itself once PhyCloud is back —
+while the disk is still full, and after space returns."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.processes import BridgeProcess, StubProcess, python_env, wait_for
+
+VOLUME_MB = 8
+
+pytestmark = pytest.mark.skipif(
+    os.geteuid() != 0, reason="mounting a tmpfs needs root (CI runs as root)"
+)
+
+
+@pytest.fixture
+def volume(tmp_path: Path):
+    path = tmp_path / "volume"
+    path.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={VOLUME_MB}m", "tmpfs", str(path)],
+        capture_output=True,
+        text=True,
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
+    yield path
+    subprocess.run(["umount", "-l", str(path)], check=False)
+
+
+def fill(volume: Path, leave_bytes: int) -> Path:
+    """A file that takes all but ``leave_bytes`` of the volume."""
+    stat = os.statvfs(volume)
+    free = stat.f_bavail * stat.f_frsize
+    filler = volume / "filler"
+    with filler.open("wb") as out:
+        out.write(b"\0" * max(0, free - leave_bytes))
+    return filler
+
+
+def status(env: dict[str, str]) -> dict:
+    result = subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        env=python_env(**env),
+    )
+    return json.loads(result.stdout) if result.stdout else {}
+
+
+def test_a_full_disk_is_survived_counted_and_drained_by_itself(
+    volume: Path, tmp_path: Path
+) -> None:
+    stub = StubProcess(tmp_path / "stub.db")  # PhyCloud: down until the disk is full
+    env = {
+        "PHYCLOUD_ENDPOINT": stub.endpoint,
+        "QUEUE_PATH": str(volume / "queue.db"),
+        "BRIDGE_INPUT": "sim",
+        "SAMPLE_RATE_HZ": "100",
+        "QUEUE_COMPRESSION": "none",
+        "RETRY_MIN_S": "0.2",
+        "RETRY_MAX_S": "1",
+        "FLUSH_INTERVAL_S": "0.2",
+        "BATCH_SIZE": "50",
+    }
+    filler = fill(volume, leave_bytes=2 * 1024 * 1024)
+    bridge = BridgeProcess(tmp_path / "bridge.log", **env).start()
+    try:
+        full = wait_for(
+            lambda: (doc := status(env)).get("drops", {}).get("disk_full") and doc,
+            120,
+            "the disk to fill and events to be refused",
+        )
+        assert full["running"], full
+        assert bridge.process.poll() is None
+
+        # a restart on the full disk: the new bridge must start and keep running
+        bridge.signal(signal.SIGKILL)
+        bridge.wait(10)
+        bridge = BridgeProcess(tmp_path / "bridge.log", **env).start()
+        restarted = wait_for(
+            lambda: (
+                (doc := status(env)).get("service", {}).get("pid") == bridge.process.pid and doc
+            ),
+            60,
+            "the restarted bridge's heartbeat",
+        )
+        assert restarted["running"] and bridge.process.poll() is None
+
+        # PhyCloud back while the disk is still full: the running bridge drains
+        stub.start()
+        wait_for(lambda: stub.stats()["unique"] > 500, 120, "sending on a full disk")
+        assert os.statvfs(volume).f_bavail * os.statvfs(volume).f_frsize < 1024 * 1024
+
+        # space returns: everything left goes, by itself
+        filler.unlink()
+        wait_for(lambda: status(env)["queue"]["depth"] < 60, 120, "the backlog to drain")
+        bridge.signal(signal.SIGTERM)
+        assert bridge.wait(60) == 0
+        delivered = stub.stats()["unique"]
+    finally:
+        bridge.stop()
+        stub.stop()
+
+    final = status(env)
+    drops = final["drops"]
+    assert drops.get("disk_full", 0) > 0
+    # every event built is accounted for: delivered, still queued, or counted as dropped
+    assert final["queued_total"] == final["sent_total"] + final["queue"]["depth"] + sum(
+        n for reason, n in drops.items() if reason != "writer_backlog"
+    )
+    assert final["queue"]["depth"] == 0
+    assert delivered == final["sent_total"]

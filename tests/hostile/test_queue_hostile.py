@@ -1,0 +1,242 @@
+"""The queue file under hostile conditions, on real files and real processes: another
+process holding the write lock, a killed owner's claims, a device or a read-only place
+as QUEUE_PATH, a queue from a newer version, another application's database, and two
+services on one file."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from phytrace_edge.config import load_settings
+from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime.health import report
+from tests.processes import BridgeProcess, python_env, wait_for
+
+ROOT = pytest.mark.skipif(os.geteuid() != 0, reason="needs root (mknod, mount); CI runs as root")
+
+
+def run_bridge(tmp_path: Path, **env: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "run", "--input", "sim"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=python_env(**env),
+    )
+
+
+def one_line(result: subprocess.CompletedProcess[str]) -> str:
+    lines = result.stderr.strip().splitlines()
+    assert "Traceback" not in result.stderr and len(lines) == 1, result.stderr
+    return lines[0]
+
+
+HOLD_LOCK = """
+import sqlite3, sys, time
+db = sqlite3.connect(sys.argv[1], isolation_level=None)
+db.execute("BEGIN IMMEDIATE")
+print("locked", flush=True)
+time.sleep(float(sys.argv[2]))
+db.execute("ROLLBACK")
+"""
+
+
+def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
+    tmp_path: Path, stub
+) -> None:
+    settings = load_settings(
+        env={
+            "PHYCLOUD_ENDPOINT": stub.endpoint,
+            "QUEUE_PATH": str(tmp_path / "queue.db"),
+            "BRIDGE_INPUT": "sim",
+            "SAMPLE_RATE_HZ": "20",
+            "FLUSH_INTERVAL_S": "0.2",
+        }
+    ).settings
+    built: list[str] = []
+    service = wiring.build_service(settings, {}, on_event=lambda e: built.append(e["event_id"]))
+    service.start()
+    holder = None
+    try:
+        wait_for(lambda: service.sender.stats.events_sent > 10, 30, "the first sends")
+        holder = subprocess.Popen(
+            [sys.executable, "-c", HOLD_LOCK, str(tmp_path / "queue.db"), "12"],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert holder.stdout.readline().strip() == "locked"
+        wait_for(lambda: service.sender.stats.queue_errors > 0, 30, "the sender to meet the lock")
+        service.heartbeat(running=True)  # as the heartbeat thread would, a moment later
+        during = report(
+            read_stats(wiring.queue_path(settings), time.time()),
+            wiring.health_thresholds(settings),
+            time.time(),
+        )
+        assert any("cannot use the queue" in p for p in during["problems"]), during["problems"]
+        holder.wait(30)
+        sent = service.sender.stats.events_sent
+        wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
+    finally:
+        if holder is not None and holder.poll() is None:
+            holder.kill()
+        service.shutdown(settings.shutdown_grace_s)
+    assert service.supervisor.restarts["sender"] == 0  # paused, never crashed
+    assert service.store_depth_at_stop == 0
+    assert set(stub.event_ids()) == set(built)
+
+
+CLAIM_AND_WAIT = """
+import sys
+from phytrace_edge.queue.store import QueueStore
+store = QueueStore.open(sys.argv[1])
+batch = store.claim_batch(100, 10**7)
+print(len(batch.events), flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_killed_owners_claims_are_taken_back_at_once(tmp_path: Path) -> None:
+    path = tmp_path / "queue.db"
+    with QueueStore.open(path) as store:
+        store.put_many([{"event_id": f"e{i}"} for i in range(30)])
+    owner = subprocess.Popen(
+        [sys.executable, "-c", CLAIM_AND_WAIT, str(path)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=python_env(),
+    )
+    try:
+        assert owner.stdout.readline().strip() == "30"
+        with QueueStore.open(path, lease_s=3600) as other:
+            assert other.claim_batch(100, 10**7) is None  # a live owner's claim holds
+            os.kill(owner.pid, signal.SIGKILL)
+            owner.wait(10)
+            batch = other.claim_batch(100, 10**7)  # no waiting for the lease (an hour)
+            assert batch is not None and len(batch.events) == 30
+    finally:
+        if owner.poll() is None:
+            owner.kill()
+            owner.wait()
+    with QueueStore.open(path) as reopened:  # and a new process finds them free too
+        assert reopened.stats().leased == 0
+
+
+@ROOT
+def test_a_character_device_as_queue_path_is_refused_and_left_alone(tmp_path: Path) -> None:
+    device = tmp_path / "null"
+    os.mknod(device, 0o666 | stat.S_IFCHR, os.makedev(1, 3))  # a /dev/null of our own
+    device.chmod(0o666)
+    result = run_bridge(tmp_path, QUEUE_PATH=str(device))
+    assert result.returncode == 4
+    assert "not a regular file" in one_line(result)
+    assert stat.S_IMODE(device.stat().st_mode) == 0o666  # never chmod'ed
+
+
+@ROOT
+def test_a_new_queue_in_a_read_only_place_is_one_line(tmp_path: Path) -> None:
+    place = read_only_mount(tmp_path)
+    result = run_bridge(tmp_path, QUEUE_PATH=str(place / "queue.db"))
+    assert result.returncode == 4
+    assert "(Read-only file system)" in one_line(result)
+
+
+@ROOT
+def test_status_reads_a_queue_on_a_read_only_volume(tmp_path: Path) -> None:
+    source = tmp_path / "rw"
+    source.mkdir()
+    with QueueStore.open(source / "queue.db") as store:
+        store.put_many([{"event_id": f"e{i}"} for i in range(7)])
+    place = read_only_mount(tmp_path, source)
+    result = subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=python_env(QUEUE_PATH=str(place / "queue.db")),
+    )
+    assert '"depth": 7' in result.stdout, result.stderr
+    assert result.returncode == 3  # not running, and readable
+
+
+def read_only_mount(tmp_path: Path, source: Path | None = None) -> Path:
+    """A read-only bind mount (of ``source``, or of an empty folder), unmounted at exit."""
+    source = source or (tmp_path / "empty")
+    source.mkdir(exist_ok=True)
+    target = tmp_path / "read-only"
+    target.mkdir()
+    for command in (
+        ["mount", "--bind", str(source), str(target)],
+        ["mount", "-o", "remount,ro,bind", str(target)],
+    ):
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode:
+            pytest.skip(f"cannot make a read-only mount here: {done.stderr.strip()}")
+    import atexit
+
+    atexit.register(subprocess.run, ["umount", "-l", str(target)], check=False)
+    return target
+
+
+def test_a_queue_from_a_newer_version_is_refused_not_used(tmp_path: Path) -> None:
+    path = tmp_path / "queue.db"
+    with QueueStore.open(path) as store:
+        store.put({"event_id": "keep-me"})
+    db = sqlite3.connect(path)
+    db.execute("PRAGMA user_version = 99")
+    db.close()  # (a `with` block only commits: the checkpoint comes at close)
+    before = path.read_bytes()
+    result = run_bridge(tmp_path, QUEUE_PATH=str(path))
+    assert result.returncode == 4
+    line = one_line(result)
+    assert "schema version 99" in line and "upgrade phytrace-edge" in line
+    assert path.read_bytes() == before  # not migrated, not moved, not touched
+
+
+def test_another_applications_database_is_moved_aside(tmp_path: Path) -> None:
+    path = tmp_path / "queue.db"
+    with sqlite3.connect(path) as db:
+        db.execute("CREATE TABLE photos(id INTEGER PRIMARY KEY, caption TEXT)")
+        db.execute("INSERT INTO photos(caption) VALUES ('holiday')")
+    with QueueStore.open(path) as store:
+        assert store.stats().quarantined is not None
+        moved = Path(store.stats().quarantined)
+    with sqlite3.connect(moved) as db:  # the other application's data, intact
+        assert db.execute("SELECT caption FROM photos").fetchone() == ("holiday",)
+        tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master")}
+    assert "events" not in tables  # no queue tables were added to it
+
+
+def test_a_second_run_on_the_same_queue_is_refused_with_the_first_ones_pid(
+    tmp_path: Path,
+) -> None:
+    env = {"QUEUE_PATH": str(tmp_path / "queue.db"), "BRIDGE_INPUT": "sim"}
+    first = BridgeProcess(tmp_path / "first.log", **env).start()
+    try:
+        wait_for(lambda: Path(f"{tmp_path / 'queue.db'}.lock").exists(), 30, "the first run")
+        wait_for(lambda: "input sim" in (tmp_path / "first.log").read_text(), 30, "its start")
+        second = run_bridge(tmp_path, **env)
+        assert second.returncode == 4
+        assert f"in use by another phytrace-edge run (pid {first.process.pid})" in one_line(second)
+        drain = subprocess.run(
+            [sys.executable, "-m", "phytrace_edge", "drain", "--timeout", "1"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=python_env(**env),
+        )
+        assert "in use" not in drain.stderr  # drain beside the service stays allowed
+        assert first.process.poll() is None
+    finally:
+        first.stop()
