@@ -11,16 +11,6 @@ import pytest
 from tests.flavours import FLAVOURS
 
 HAVE_ROSBAGS = importlib.util.find_spec("rosbags") is not None
-DOMAINS = (
-    "location",
-    "motion",
-    "power",
-    "operational",
-    "navigation",
-    "perception",
-    "actuators",
-    "payload",
-)
 
 
 @pytest.fixture(params=FLAVOURS)

@@ -6,6 +6,7 @@ Waiting is always on a condition with a deadline, never a bare sleep.
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import re
@@ -56,6 +57,23 @@ def python_env(**extra: str) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PHYCLOUD_", "QUEUE_"))}
     env.update(PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1", **extra)
     return env
+
+
+def run_cli(*args: str, timeout: float = 120, **env: str) -> subprocess.CompletedProcess[str]:
+    """``phytrace-edge ARGS`` in a fresh process, its settings from ``env``."""
+    return subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=python_env(**env),
+    )
+
+
+def status_json(**env: str) -> tuple[int, dict[str, Any]]:
+    """``phytrace-edge status --json``: (exit code, document or {})."""
+    result = run_cli("status", "--json", timeout=30, **env)
+    return result.returncode, json.loads(result.stdout) if result.stdout else {}
 
 
 class StubProcess:

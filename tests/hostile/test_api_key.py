@@ -14,7 +14,7 @@ import httpx
 import pytest
 
 from tests.hostile.servers import BadServer
-from tests.processes import BridgeProcess, free_port, python_env, wait_for
+from tests.processes import BridgeProcess, free_port, python_env, run_cli, status_json, wait_for
 
 KEY = "phk_live_Zq8v2K9x7Lw3"
 
@@ -86,15 +86,8 @@ def test_the_key_is_in_no_output_even_when_the_server_echoes_it(tmp_path: Path) 
 
 
 def dead_letters(env: dict[str, str]) -> int:
-    result = cli(env, "status", "--json")
-    return json.loads(result.stdout)["dead_letters"] if result.stdout else 0
+    return status_json(**env)[1].get("dead_letters", 0)
 
 
 def cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=python_env(**env),
-    )
+    return run_cli(*args, **env)

@@ -4,7 +4,6 @@ replay stops at SIGTERM wherever it is."""
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -13,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.processes import python_env, wait_for
+from tests.processes import python_env, status_json, wait_for
 
 pytest.importorskip("rosbags", reason="bag replay needs rosbags (pip install .[bag])")
 
@@ -70,14 +69,7 @@ def replay(bag: Path, tmp_path: Path, **env: str) -> subprocess.Popen[str]:
 
 
 def status(tmp_path: Path) -> dict:
-    result = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        env=python_env(QUEUE_PATH=str(tmp_path / "q.db")),
-    )
-    return json.loads(result.stdout)
+    return status_json(QUEUE_PATH=str(tmp_path / "q.db"))[1]
 
 
 def test_a_days_long_gap_is_skipped_not_ticked_through(tmp_path: Path, stub) -> None:

@@ -5,16 +5,14 @@ while the disk is still full, and after space returns."""
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.processes import BridgeProcess, StubProcess, python_env, wait_for
+from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 
 VOLUME_MB = 8
 
@@ -49,14 +47,7 @@ def fill(volume: Path, leave_bytes: int) -> Path:
 
 
 def status(env: dict[str, str]) -> dict:
-    result = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        env=python_env(**env),
-    )
-    return json.loads(result.stdout) if result.stdout else {}
+    return status_json(**env)[1]
 
 
 def test_a_full_disk_is_survived_counted_and_drained_by_itself(

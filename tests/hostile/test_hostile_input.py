@@ -221,5 +221,5 @@ def test_values_that_were_once_accepted_or_crashed_are_refused(name: str, value:
 
 
 def test_a_float_from_a_config_file_is_not_cut_to_a_whole_number() -> None:
-    with pytest.raises(ConfigError, match="batch_size=1.9: must be a whole number"):
+    with pytest.raises(ConfigError, match=r"batch_size=1\.9: must be a whole number"):
         load_settings(config_file={"batch_size": 1.9}, file_label="config file x.toml")

@@ -21,19 +21,13 @@ from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import wiring
 from phytrace_edge.runtime.health import report
-from tests.processes import BridgeProcess, python_env, wait_for
+from tests.processes import BridgeProcess, python_env, run_cli, wait_for
 
 ROOT = pytest.mark.skipif(os.geteuid() != 0, reason="needs root (mknod, mount); CI runs as root")
 
 
 def run_bridge(tmp_path: Path, **env: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "run", "--input", "sim"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=python_env(**env),
-    )
+    return run_cli("run", "--input", "sim", timeout=60, **env)
 
 
 def one_line(result: subprocess.CompletedProcess[str]) -> str:
@@ -159,13 +153,7 @@ def test_status_reads_a_queue_on_a_read_only_volume(tmp_path: Path) -> None:
     with QueueStore.open(source / "queue.db") as store:
         store.put_many([{"event_id": f"e{i}"} for i in range(7)])
     place = read_only_mount(tmp_path, source)
-    result = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env=python_env(QUEUE_PATH=str(place / "queue.db")),
-    )
+    result = run_cli("status", "--json", timeout=60, QUEUE_PATH=str(place / "queue.db"))
     assert '"depth": 7' in result.stdout, result.stderr
     assert result.returncode == 3  # not running, and readable
 
@@ -229,13 +217,7 @@ def test_a_second_run_on_the_same_queue_is_refused_with_the_first_ones_pid(
         second = run_bridge(tmp_path, **env)
         assert second.returncode == 4
         assert f"in use by another phytrace-edge run (pid {first.process.pid})" in one_line(second)
-        drain = subprocess.run(
-            [sys.executable, "-m", "phytrace_edge", "drain", "--timeout", "1"],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env=python_env(**env),
-        )
+        drain = run_cli("drain", "--timeout", "1", timeout=60, **env)
         assert "in use" not in drain.stderr  # drain beside the service stays allowed
         assert first.process.poll() is None
     finally:

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from phytrace_edge import run_simulation
+from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.config.parsers import KNOWN_TOPICS
@@ -21,7 +22,6 @@ from phytrace_edge.ingest.sources.bag import BagClock, replay
 from phytrace_edge.ingest.sources.base import Feed
 from phytrace_edge.sim.recorder import CUSTOM_TOPIC, record_simulation
 from phytrace_edge.udm.schema import find_violation
-from tests.conftest import DOMAINS
 from tests.processes import python_env
 
 pytest.importorskip("rosbags", reason="bag replay needs rosbags (pip install .[bag])")

@@ -17,6 +17,7 @@ pytest.importorskip("cyclonedds", reason="the DDS input needs cyclonedds (pip in
 
 from cyclonedds.idl import IdlStruct
 
+from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import load_settings
@@ -27,7 +28,6 @@ from phytrace_edge.ingest.sources.base import Feed
 from phytrace_edge.ingest.sources.dds import DdsSource, domain_settings
 from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import find_violation
-from tests.conftest import DOMAINS
 from tests.processes import python_env, wait_for
 
 PUBLISHER = str(Path(__file__).with_name("dds_publisher.py"))

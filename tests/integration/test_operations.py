@@ -8,7 +8,6 @@ from __future__ import annotations
 import signal
 import sqlite3
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -16,19 +15,9 @@ import httpx
 import orjson
 import pytest
 
-from tests.processes import BridgeProcess, free_port, python_env, wait_for
+from tests.processes import BridgeProcess, free_port, run_cli, status_json, wait_for
 
 SECRET = "phk_live_never_print_me"
-
-
-def cli(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env=python_env(**env),
-    )
 
 
 def env_for(tmp_path: Path, endpoint: str, **extra: str) -> dict[str, str]:
@@ -46,8 +35,7 @@ def env_for(tmp_path: Path, endpoint: str, **extra: str) -> dict[str, str]:
 
 
 def status(env: dict[str, str]) -> tuple[int, dict]:
-    result = cli("status", "--json", **env)
-    return result.returncode, orjson.loads(result.stdout) if result.stdout else {}
+    return status_json(**env)
 
 
 @pytest.fixture
@@ -84,7 +72,7 @@ def test_status_while_running_and_after_a_clean_stop(running, tmp_path: Path, st
         assert key in doc
     assert doc["heartbeat_age_s"] < 5
     assert doc["topics"]["/odom"]["rate_hz"] > 0
-    table = cli("status", **env)
+    table = run_cli("status", **env)
     assert table.returncode == 0 and table.stdout.startswith("phytrace-edge status: HEALTHY")
 
     bridge.signal(signal.SIGTERM)
@@ -102,7 +90,7 @@ def test_status_while_running_and_after_a_clean_stop(running, tmp_path: Path, st
 
 
 def test_status_without_a_queue(tmp_path: Path) -> None:
-    result = cli("status", QUEUE_PATH=str(tmp_path / "none.db"))
+    result = run_cli("status", QUEUE_PATH=str(tmp_path / "none.db"))
     assert result.returncode == 3 and "never ran" in result.stderr
 
 
@@ -134,7 +122,7 @@ def not_a_queue(tmp_path: Path, kind: str) -> Path:
 def test_status_on_a_path_that_is_not_a_queue_is_one_line(tmp_path: Path, kind: str) -> None:
     path = not_a_queue(tmp_path, kind)
     mode = path.stat().st_mode
-    result = cli("status", QUEUE_PATH=str(path))
+    result = run_cli("status", QUEUE_PATH=str(path))
     assert result.returncode == 4, result.stderr
     assert "Traceback" not in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
@@ -164,11 +152,11 @@ def test_drain_ships_a_backlog_left_by_a_stopped_bridge(tmp_path: Path, stub) ->
     left = status(env)[1]["queue"]["depth"]
     assert left > 30
 
-    timed_out = cli("drain", "--timeout", "2", **env)
+    timed_out = run_cli("drain", "--timeout", "2", **env)
     assert timed_out.returncode == 1 and "left (HTTP 503)" in timed_out.stdout
 
     stub.set_faults(fixed_status=None)
-    drained = cli("drain", **env)
+    drained = run_cli("drain", **env)
     assert drained.returncode == 0, drained.stdout + drained.stderr
     assert "the queue is empty" in drained.stdout
     assert status(env)[1]["queue"]["depth"] == 0
@@ -178,7 +166,7 @@ def test_drain_ships_a_backlog_left_by_a_stopped_bridge(tmp_path: Path, stub) ->
 def test_drain_while_the_service_runs_never_double_sends(running, stub) -> None:
     bridge, env = running
     for _ in range(3):
-        assert cli("drain", "--timeout", "20", **env).returncode in (0, 1)
+        assert run_cli("drain", "--timeout", "20", **env).returncode in (0, 1)
     bridge.signal(signal.SIGTERM)
     assert bridge.wait(timeout=30) == 0
     stats = stub.stats()

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.udm.event import format_timestamp, new_event_id
 from phytrace_edge.udm.schema import check_event, find_violation, load_schema
-from tests.conftest import DOMAINS
 
 REFERENCE_EVENT = json.loads(
     (Path(__file__).parent.parent / "data/reference_event.json").read_text()
