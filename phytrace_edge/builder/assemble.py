@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from phytrace_edge.ingest.convert import compact, compass_heading_deg, finite
+from phytrace_edge.ingest.convert import MM, compass_heading_deg, present, rounded
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
@@ -135,19 +135,15 @@ def _location(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     gps = r.get("/gps/fix", {}).get("gps", {})
     orientation = r.get("/imu/data", {}).get("imu", {}).get("orientation_deg")
     located = "latitude" in gps
-    return compact(
-        {
-            "latitude": gps.get("latitude"),
-            "longitude": gps.get("longitude"),
-            "altitude_m": gps.get("altitude_m"),
-            # A compass heading only makes sense with a geographic position; the IMU's
-            # world frame is ENU (REP-103/REP-145), so its yaw converts directly.
-            "heading_deg": (
-                compass_heading_deg(orientation["yaw"]) if located and orientation else None
-            ),
-            "coordinate_system": "WGS84" if located else None,
-            "local": r.get("/odom", {}).get("local"),
-        }
+    return present(
+        latitude=gps.get("latitude"),
+        longitude=gps.get("longitude"),
+        altitude_m=gps.get("altitude_m"),
+        # A compass heading only makes sense with a geographic position; the IMU's
+        # world frame is ENU (REP-103/REP-145), so its yaw converts directly.
+        heading_deg=(compass_heading_deg(orientation["yaw"]) if located and orientation else None),
+        coordinate_system="WGS84" if located else None,
+        local=r.get("/odom", {}).get("local"),
     )
 
 
@@ -158,15 +154,13 @@ def _motion(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     angular = odom.get("angular_velocity") or (
         {"yaw_dps": imu_rates["z"]} if "z" in imu_rates else None
     )
-    speed = finite(math.hypot(*linear.values())) if linear else None
-    return compact(
-        {
-            "linear_velocity": linear,
-            "angular_velocity": angular,
-            "speed_mps": speed,
-            "commanded_velocity": r.get("/cmd_vel", {}).get("commanded_velocity"),
-            "motion_state": _motion_state(speed, (angular or {}).get("yaw_dps")),
-        }
+    speed = rounded(math.hypot(*linear.values()), MM) if linear else None
+    return present(
+        linear_velocity=linear,
+        angular_velocity=angular,
+        speed_mps=speed,
+        commanded_velocity=r.get("/cmd_vel", {}).get("commanded_velocity"),
+        motion_state=_motion_state(speed, (angular or {}).get("yaw_dps")),
     )
 
 
@@ -184,45 +178,37 @@ def _power(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     battery = r.get("/battery_state")
     if battery is None:
         return {}
-    return compact(
-        {
-            "battery": battery.get("battery"),
-            "charging": battery.get("charging"),
-            "power_state": battery.get("power_state"),
-        }
+    return present(
+        battery=battery.get("battery"),
+        charging=battery.get("charging"),
+        power_state=battery.get("power_state"),
     )
 
 
 def _operational(r: dict[str, dict[str, Any]], snapshot: Snapshot) -> dict[str, Any]:
     delivery = r.get("/delivery/status", {})
     reporting_errors = "/diagnostics" in r or snapshot.errors
-    return compact(
-        {
-            "state": delivery.get("state"),
-            "task": delivery.get("task"),
-            "errors": snapshot.errors if reporting_errors else None,
-            "transitions": snapshot.transitions or None,
-        }
+    return present(
+        state=delivery.get("state"),
+        task=delivery.get("task"),
+        errors=snapshot.errors if reporting_errors else None,
+        transitions=snapshot.transitions or None,
     )
 
 
 def _navigation(r: dict[str, dict[str, Any]], snapshot: Snapshot) -> dict[str, Any]:
-    return compact(
-        {
-            "goal": r.get("/goal_pose", {}).get("goal"),
-            "new_goals": snapshot.new_goals or None,
-        }
+    return present(
+        goal=r.get("/goal_pose", {}).get("goal"),
+        new_goals=snapshot.new_goals or None,
     )
 
 
 def _perception(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     lidar = r.get("/scan", {}).get("lidar")
-    return compact(
-        {
-            "lidar": [lidar] if lidar else None,
-            "imu": r.get("/imu/data", {}).get("imu"),
-            "gps": r.get("/gps/fix", {}).get("gps"),
-        }
+    return present(
+        lidar=[lidar] if lidar else None,
+        imu=r.get("/imu/data", {}).get("imu"),
+        gps=r.get("/gps/fix", {}).get("gps"),
     )
 
 

@@ -73,7 +73,10 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
                     raise ConfigError(message) from None
             print(f"exported {written} dead letter(s)", file=sys.stderr)
         elif args.action == "requeue":
-            print(f"requeued {box.requeue(ids)} dead letter(s) at the end of the queue")
+            moved = box.requeue(ids)
+            print(f"requeued {moved} dead letter(s) at the end of the queue")
+            if box.count():
+                print(f"{box.count()} dead letter(s) remain (the queue is full, or not selected)")
         else:
             days = args.older_than_days
             before = None if days is None else store.now() - days * 86400

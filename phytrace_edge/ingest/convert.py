@@ -1,20 +1,45 @@
-"""Conversions the handlers share: hostile-number filtering, angles, stamps, text.
+"""Conversions the handlers share: hostile-number filtering, precision, angles, stamps,
+text.
 
 Every function here accepts what any of the message flavours carries (rclpy, rosbags,
 Cyclone DDS IDL samples, the mock): Python ints and floats, numpy scalars, ``bytes``
 of length one. Anything that is not a finite number becomes None, so NaN and ±inf
 never reach an event (JSON has neither, and orjson would silently write ``null``).
+
+Values keep their real precision and no more (docs/udm.md has the table): a float32
+field is written as the shortest decimal that reads back as the same float32
+(``range_min`` 0.12f is ``0.12``, not ``0.11999999731779099``), and a value the bridge
+derives (degrees from radians, a percentage, a speed) is rounded to a resolution per
+field. Handlers run for every message of every topic, so the common cases (a plain
+float or int) take the shortest path.
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+from array import array
+from collections.abc import Sequence
 from typing import Any
+
+import numpy as np
+import orjson
 
 from phytrace_edge.errors import MalformedMessage
 
 TEXT_MAX_CHARS = 256
+# Resolutions of derived values, as steps per unit (docs/udm.md).
+MM = 1e3  # metres: 1 mm; m/s, m/s²: 1 mm/s, 1 mm/s²
+MILLIDEGREE = 1e3  # degrees and degrees per second: 0.001°
+PERCENT = 1e2  # 0.01 %
+LATLON = 1e7  # 1e-7° (about 1 cm)
+RAD = 1e5  # radians (joint positions): 1e-5 rad
+RAD_S = 1e4  # rad/s: 1e-4 rad/s
+
+_float32 = np.float32
+F32_MAX = 3.4028234663852886e38
+_PLAIN_NUMBERS = {float, int}
+_DEGREES_PER_RADIAN = 180.0 / math.pi
 
 
 def finite(value: Any) -> float | None:
@@ -22,35 +47,104 @@ def finite(value: Any) -> float | None:
 
     Booleans are rejected: a bool in a numeric field is a wrong type, not a 0 or 1.
     """
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is int:
+        return float(value) if -1e308 < value < 1e308 else None
+    if kind is bool or not isinstance(value, numbers.Real):
         return None
     number = float(value)
     return number if math.isfinite(number) else None
 
 
+def rounded(value: Any, steps: float) -> float | None:
+    """A finite number rounded to 1/``steps`` (``MM`` = 1000: to the millimetre), else
+    None. ``round(x * steps) / steps`` is the double nearest the rounded decimal, so it
+    prints as that decimal, and costs a quarter of ``round(x, 3)``."""
+    if type(value) is not float:
+        value = finite(value)
+        if value is None:
+            return None
+    scaled = value * steps
+    if scaled - scaled != 0.0:  # NaN or inf, or a finite value too large to scale
+        return value if math.isfinite(value) else None
+    return round(scaled) / steps
+
+
+def snap(number: float, steps: float) -> float:
+    """A finite ``number`` rounded to 1/``steps``."""
+    scaled = number * steps
+    return round(scaled) / steps if math.isfinite(scaled) else number
+
+
+def f32(value: Any) -> float | None:
+    """A float32 field at its real precision: the shortest decimal that reads back as
+    the same float32 (numpy's shortest repr of float32), else None."""
+    number = finite(value)
+    if number is None or not -F32_MAX <= number <= F32_MAX:
+        return None
+    return float(str(_float32(number)))
+
+
+def f32_all(values: Sequence[Any], items: Any = ()) -> list[float | None]:
+    """``f32`` of many values at once (a battery's fields, then its cells from
+    ``items``): packed as float32, written by orjson as the shortest decimals (what
+    float32 cannot hold, and NaN, as null) and read back, for about the cost of
+    ``f32`` on four values."""
+    try:
+        if not set(map(type, values)) <= _PLAIN_NUMBERS:
+            raise TypeError("not all plain numbers")
+        packed = array("f", values)
+    except (TypeError, OverflowError):  # a bool, a string, a huge int: value by value
+        packed = array("f", [math.nan if (n := finite(v)) is None else n for v in values])
+    if len(items):
+        if getattr(items, "typecode", None) == "f":  # rclpy's float32 sequences
+            packed.extend(items)
+        else:  # what float32 cannot hold becomes NaN, written as null
+            wide = float_array(items)
+            wide = np.where(np.abs(wide) <= F32_MAX, wide, math.nan)
+            packed.frombytes(wide.astype(_float32).tobytes())
+    array32 = np.frombuffer(packed, dtype=_float32)
+    parsed: list[float | None] = orjson.loads(
+        orjson.dumps(array32, option=orjson.OPT_SERIALIZE_NUMPY)
+    )
+    return parsed
+
+
 def integer(value: Any) -> int | None:
     """``value`` as an int for integral fields (uint8, int8, ...): int, numpy int,
     or a one-byte ``bytes`` as rclpy gives for the ROS ``byte`` type."""
-    if isinstance(value, (bytes, bytearray)):
+    kind = type(value)
+    if kind is int:
+        return value
+    if kind is bytes or kind is bytearray:
         return value[0] if len(value) == 1 else None
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+    if kind is bool or not isinstance(value, numbers.Integral):
         return None
     return int(value)
 
 
 def text(value: Any) -> str | None:
     """A string field, cut to the schema's 256 characters; None when not a string."""
+    if type(value) is str:
+        return value[:TEXT_MAX_CHARS]
     if isinstance(value, (bytes, bytearray)):
-        value = bytes(value).decode("utf-8", "replace")
+        return bytes(value).decode("utf-8", "replace")[:TEXT_MAX_CHARS]
     if not isinstance(value, str):
         return None
     return value[:TEXT_MAX_CHARS]
 
 
 def degrees(radians: Any) -> float | None:
-    """Radians to degrees, None when not finite (before or after: 1e307 rad overflows)."""
-    value = finite(radians)
-    return None if value is None else finite(math.degrees(value))
+    """Radians to degrees, to 0.001°; None when not finite (before or after: 1e307 rad
+    overflows)."""
+    if type(radians) is not float:
+        radians = finite(radians)
+        if radians is None:
+            return None
+    converted = radians * _DEGREES_PER_RADIAN
+    return rounded(converted, MILLIDEGREE) if math.isfinite(converted) else None
 
 
 def wrap_degrees(angle: float) -> float:
@@ -59,16 +153,15 @@ def wrap_degrees(angle: float) -> float:
 
 
 def quaternion_to_rpy_deg(q: Any) -> tuple[float, float, float] | None:
-    """Roll, pitch, yaw in degrees from a ``geometry_msgs/Quaternion``.
+    """Roll, pitch, yaw in degrees (to 0.001°) from a ``geometry_msgs/Quaternion``.
 
     The rotation is the REP-103 intrinsic z-y'-x'' sequence (yaw about z up, then
     pitch, then roll), the same as tf2's ``getRPY``. The quaternion is normalised
     first; a zero or non-finite one has no orientation and gives None.
     """
-    parts = [finite(getattr(q, axis, None)) for axis in ("x", "y", "z", "w")]
-    if any(part is None for part in parts):
+    x, y, z, w = (finite(getattr(q, axis, None)) for axis in ("x", "y", "z", "w"))
+    if x is None or y is None or z is None or w is None:
         return None
-    x, y, z, w = (float(part) for part in parts)  # type: ignore[arg-type]
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if not math.isfinite(norm) or norm < 1e-9:
         return None
@@ -78,16 +171,29 @@ def quaternion_to_rpy_deg(q: Any) -> tuple[float, float, float] | None:
     pitch = math.asin(sin_pitch)
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return (
-        wrap_degrees(math.degrees(roll)),
-        math.degrees(pitch),
-        wrap_degrees(math.degrees(yaw)),
+        snap(wrap_degrees(math.degrees(roll)), MILLIDEGREE),
+        snap(math.degrees(pitch), MILLIDEGREE),
+        snap(wrap_degrees(math.degrees(yaw)), MILLIDEGREE),
     )
+
+
+def quaternion_to_yaw_deg(q: Any) -> float | None:
+    """The yaw alone (a pose's heading in its frame), as in ``quaternion_to_rpy_deg``."""
+    x, y = finite(getattr(q, "x", None)), finite(getattr(q, "y", None))
+    z, w = finite(getattr(q, "z", None)), finite(getattr(q, "w", None))
+    if x is None or y is None or z is None or w is None:
+        return None
+    norm2 = x * x + y * y + z * z + w * w
+    if not math.isfinite(norm2) or norm2 < 1e-18:
+        return None
+    yaw = math.atan2(2.0 * (w * z + x * y) / norm2, 1.0 - 2.0 * (y * y + z * z) / norm2)
+    return snap(wrap_degrees(math.degrees(yaw)), MILLIDEGREE)
 
 
 def compass_heading_deg(enu_yaw_deg: float) -> float:
     """Compass heading (0 = north, clockwise, [0, 360)) from a REP-103 ENU yaw
     (0 = east, counter-clockwise)."""
-    heading = (90.0 - enu_yaw_deg) % 360.0
+    heading = snap((90.0 - enu_yaw_deg) % 360.0, MILLIDEGREE)
     return 0.0 if heading >= 360.0 else heading
 
 
@@ -97,58 +203,65 @@ def stamp_ns(header: Any) -> int | None:
     A zero stamp means the publisher did not set it, not 1970.
     """
     stamp = getattr(header, "stamp", None)
-    sec = integer(getattr(stamp, "sec", None))
-    nanosec = integer(getattr(stamp, "nanosec", None))
-    if sec is None or nanosec is None or (sec == 0 and nanosec == 0):
+    sec, nanosec = getattr(stamp, "sec", None), getattr(stamp, "nanosec", None)
+    if type(sec) is not int or type(nanosec) is not int:
+        sec, nanosec = integer(sec), integer(nanosec)
+        if sec is None or nanosec is None:
+            return None
+    if sec == 0 and nanosec == 0:
         return None
     return sec * 1_000_000_000 + nanosec
 
 
-def xyz(vector: Any, keys: tuple[str, str, str] = ("x", "y", "z")) -> dict[str, float]:
+def xyz(
+    vector: Any, keys: tuple[str, str, str] = ("x", "y", "z"), steps: float = MM
+) -> dict[str, float]:
     """A ``Vector3``/``Point`` as a dict of its finite components under ``keys``."""
-    out = {}
-    for axis, key in zip(("x", "y", "z"), keys, strict=True):
-        value = finite(getattr(vector, axis, None))
-        if value is not None:
-            out[key] = value
-    return out
+    x = rounded(getattr(vector, "x", None), steps)
+    y = rounded(getattr(vector, "y", None), steps)
+    z = rounded(getattr(vector, "z", None), steps)
+    if x is not None and y is not None and z is not None:
+        return {keys[0]: x, keys[1]: y, keys[2]: z}
+    return {key: v for key, v in zip(keys, (x, y, z), strict=True) if v is not None}
 
 
-def xyz_deg(vector: Any) -> dict[str, float]:
+def xyz_deg(vector: Any, keys: tuple[str, str, str] = ("x", "y", "z")) -> dict[str, float]:
     """A ``Vector3`` in rad/s as a dict of finite components in degrees/s."""
-    out = {}
-    for axis in ("x", "y", "z"):
-        value = degrees(getattr(vector, axis, None))
-        if value is not None:
-            out[axis] = value
-    return out
+    x = degrees(getattr(vector, "x", None))
+    y = degrees(getattr(vector, "y", None))
+    z = degrees(getattr(vector, "z", None))
+    if x is not None and y is not None and z is not None:
+        return {keys[0]: x, keys[1]: y, keys[2]: z}
+    return {key: v for key, v in zip(keys, (x, y, z), strict=True) if v is not None}
 
 
-def compact(value: Any) -> Any:
-    """Drop None values and empty dicts, recursively: absent data means absent fields."""
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            item = compact(item)
-            if item is not None and item != {}:
-                out[key] = item
-        return out
-    if isinstance(value, list):
-        return [compact(item) for item in value]
-    return value
+def present(**values: Any) -> dict[str, Any]:
+    """The given fields without the absent ones (None or an empty dict): absent data
+    means absent fields, never nulls."""
+    return {key: value for key, value in values.items() if value is not None and value != {}}
 
 
 def header_fields(msg: Any) -> dict[str, Any]:
     """``stamp_ns`` and ``frame_id`` of a message's ``std_msgs/Header``."""
     header = getattr(msg, "header", None)
-    return {"stamp_ns": stamp_ns(header), "frame_id": text(getattr(header, "frame_id", None))}
+    fields: dict[str, Any] = {}
+    stamp = stamp_ns(header)
+    if stamp is not None:
+        fields["stamp_ns"] = stamp
+    raw = getattr(header, "frame_id", None)
+    frame = raw[:TEXT_MAX_CHARS] if type(raw) is str else text(raw)
+    if frame is not None:
+        fields["frame_id"] = frame
+    return fields
 
 
 def pose_fields(pose: Any) -> dict[str, Any]:
     """``geometry_msgs/Pose`` -> position in metres and yaw in degrees."""
     position = xyz(getattr(pose, "position", None), ("x_m", "y_m", "z_m"))
-    rpy = quaternion_to_rpy_deg(getattr(pose, "orientation", None))
-    return {**position, "yaw_deg": rpy[2] if rpy else None}
+    yaw = quaternion_to_yaw_deg(getattr(pose, "orientation", None))
+    if yaw is not None:
+        position["yaw_deg"] = yaw
+    return position
 
 
 def first_number(sequence: Any) -> float | None:
@@ -173,3 +286,13 @@ def sequence_items(msg: Any, name: str, limit: int) -> Any:
         raise MalformedMessage(
             "bad_sequence", f"{name} is {type(sequence).__name__}, not a sequence"
         ) from None
+
+
+def float_array(sequence: Any) -> Any:
+    """A numeric sequence as a flat numpy array, without copying where it can: rclpy
+    gives ``array.array('f')``, rosbags and DDS numpy arrays or lists."""
+    if isinstance(sequence, np.ndarray):
+        return sequence.ravel()
+    if getattr(sequence, "typecode", None) in ("f", "d"):
+        return np.frombuffer(sequence, dtype=np.float32 if sequence.typecode == "f" else float)
+    return np.asarray(sequence, dtype=np.float64).ravel()

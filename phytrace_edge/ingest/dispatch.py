@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest import handlers
+from phytrace_edge.ingest import handlers, status
 from phytrace_edge.ingest.handlers import Reading
 from phytrace_edge.ingest.topics import TOPICS
 
@@ -25,12 +25,21 @@ log = logging.getLogger(__name__)
 LOG_EVERY_S = 60.0
 
 
+def handler_of(name: str) -> Callable[[Any], Reading]:
+    """The handler a topic table entry names (``module:function``)."""
+    module, _, function = name.partition(":")
+    found: Callable[[Any], Reading] = getattr(
+        {"handlers": handlers, "status": status}[module], function
+    )
+    return found
+
+
 class Dispatcher:
     """Routes a message to its topic's handler and the reading to ``on_reading``."""
 
     def __init__(self, on_reading: Callable[[str, Reading], None]) -> None:
         self._on_reading = on_reading
-        self._handlers = {spec.name: getattr(handlers, spec.handler) for spec in TOPICS}
+        self._handlers = {spec.name: handler_of(spec.handler) for spec in TOPICS}
         self._lock = threading.Lock()
         self._last_logged: dict[tuple[str, str], float] = {}
         self.received: Counter[str] = Counter()

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 
 class TopicSpec:
-    """One row of the topic table. ``handler`` names the function in
-    ``ingest.handlers`` that reads the topic's messages: the settings read this table
-    at every start, so it imports nothing (not the handlers, not ``dataclasses``)."""
+    """One row of the topic table. ``handler`` names the function that reads the
+    topic's messages, as ``module:function`` in ``phytrace_edge.ingest``: the settings
+    read this table at every start, so it imports nothing (not the handlers, not
+    ``dataclasses``)."""
 
     __slots__ = (
         "also_types",
@@ -48,43 +49,50 @@ class TopicSpec:
 
 
 TOPICS: tuple[TopicSpec, ...] = (
-    TopicSpec("/odom", "nav_msgs/msg/Odometry", "handle_odometry", ("location", "motion")),
-    TopicSpec("/battery_state", "sensor_msgs/msg/BatteryState", "handle_battery_state", ("power",)),
-    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "handle_laser_scan", ("perception",)),
-    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", "handle_imu", ("perception", "motion")),
+    TopicSpec("/odom", "nav_msgs/msg/Odometry", "handlers:handle_odometry", ("location", "motion")),
+    TopicSpec(
+        "/battery_state",
+        "sensor_msgs/msg/BatteryState",
+        "handlers:handle_battery_state",
+        ("power",),
+    ),
+    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "handlers:handle_laser_scan", ("perception",)),
+    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", "handlers:handle_imu", ("perception", "motion")),
     TopicSpec(
         "/cmd_vel",
         "geometry_msgs/msg/Twist",
-        "handle_twist",
+        "handlers:handle_twist",
         ("motion",),
         also_types=("geometry_msgs/msg/TwistStamped",),  # what Jazzy's nav2 publishes
     ),
     TopicSpec(
         "/gps/fix",
         "sensor_msgs/msg/NavSatFix",
-        "handle_nav_sat_fix",
+        "handlers:handle_nav_sat_fix",
         ("location", "perception"),
     ),
     TopicSpec(
         "/diagnostics",
         "diagnostic_msgs/msg/DiagnosticArray",
-        "handle_diagnostic_array",
+        "status:handle_diagnostic_array",
         ("operational",),
         every_message=True,
     ),
     TopicSpec(
         "/goal_pose",
         "geometry_msgs/msg/PoseStamped",
-        "handle_pose_stamped",
+        "handlers:handle_pose_stamped",
         ("navigation",),
         every_message=True,
         latched=True,
     ),
-    TopicSpec("/joint_states", "sensor_msgs/msg/JointState", "handle_joint_state", ("actuators",)),
+    TopicSpec(
+        "/joint_states", "sensor_msgs/msg/JointState", "handlers:handle_joint_state", ("actuators",)
+    ),
     TopicSpec(
         "/delivery/status",
         "std_msgs/msg/String",
-        "handle_delivery_status",
+        "status:handle_delivery_status",
         ("operational", "payload"),
         every_message=True,
         latched=True,

@@ -129,6 +129,19 @@ class Caps:
             rows = rows[:keep]
         return rows
 
+    def fitting(self, cursor: sqlite3.Cursor, sizes: list[int]) -> int:
+        """How many of these rows (oldest first) fit under the caps without dropping
+        anything: what a dead-letter requeue may move back."""
+        if not sizes:
+            return 0
+        depth, used = depth_and_used_bytes(cursor, self.page_size)
+        per_event = self._bytes_per_event(sizes, depth, used)
+        fits = min(len(sizes), max(0, (self.data_cap - used) // per_event))
+        if self.limits.max_events is not None:
+            fits = min(fits, max(0, self.limits.max_events - depth))
+        self.room.forget()
+        return fits
+
     @staticmethod
     def _bytes_per_event(sizes: list[int], depth: int, used: int) -> int:
         """Disk bytes one incoming event will take: measured on the queue once it holds

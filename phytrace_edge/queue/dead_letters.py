@@ -2,7 +2,8 @@
 
 The workflow: ``list`` what is there and why, ``export`` it as JSON Lines to look at
 or hand to PhyCloud support, then ``requeue`` (after PhyCloud or the robot was fixed:
-the events go to the back of the queue and are sent again) or ``purge``.
+the events go to the back of the queue and are sent again) or ``purge``. A requeue
+never drops queued events to make room: what does not fit under the caps stays here.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import IO, Any
 
 import orjson
 
+from phytrace_edge.queue.caps import Caps
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.rows import insert_rows
@@ -38,9 +40,12 @@ class DeadLetterBox:
     """List, export, requeue and purge the dead letters of one queue
     (``QueueStore.dead_letters``)."""
 
-    def __init__(self, db: Database, codecs: Codecs, clock: Callable[[], float]) -> None:
+    def __init__(
+        self, db: Database, codecs: Codecs, caps: Caps, clock: Callable[[], float]
+    ) -> None:
         self._db = db
         self._codecs = codecs
+        self._caps = caps
         self._clock = clock
 
     def count(self) -> int:
@@ -79,17 +84,24 @@ class DeadLetterBox:
         return written
 
     def requeue(self, ids: Sequence[int] | None = None) -> int:
-        """Move dead letters (all, or ``ids``) back to the end of the queue."""
+        """Move dead letters (all, or ``ids``), oldest first, back to the end of the
+        queue, as many as fit under the caps; the number moved."""
         where, params = _selection(ids)
         now = self._clock()
         with self._db.transaction() as cursor:
             rows = cursor.execute(
-                f"SELECT event_id, ?, codec, dict_id, json_size, body FROM dead_letters {where} "
-                "ORDER BY id",
+                f"SELECT id, event_id, ?, codec, dict_id, json_size, body FROM dead_letters "
+                f"{where} ORDER BY id",
                 (now, *params),
             ).fetchall()
-            insert_rows(cursor, rows, requeued_total=len(rows), dead_letters=-len(rows))
-            cursor.execute(f"DELETE FROM dead_letters {where}", params)
+            rows = rows[: self._caps.fitting(cursor, [len(row[-1]) for row in rows])]
+            insert_rows(
+                cursor,
+                [row[1:] for row in rows],
+                requeued_total=len(rows),
+                dead_letters=-len(rows),
+            )
+            cursor.executemany("DELETE FROM dead_letters WHERE id = ?", [row[:1] for row in rows])
         return len(rows)
 
     def purge(self, ids: Sequence[int] | None = None, before: float | None = None) -> int:

@@ -88,7 +88,7 @@ class QueueStore:
         room = min(self._wal_reserve, db.reserve.size if db.reserve else self._wal_reserve)
         db.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // db.page_size // 2)}")
         self._load_dictionaries()
-        self.dead_letters = DeadLetterBox(db, self.codecs, clock)
+        self.dead_letters = DeadLetterBox(db, self.codecs, self._caps, clock)
 
     @classmethod
     def open(

@@ -9,11 +9,19 @@ import numpy as np
 import pytest
 
 from phytrace_edge.ingest.convert import (
-    compact,
+    LATLON,
+    MM,
+    PERCENT,
     compass_heading_deg,
+    degrees,
+    f32,
+    f32_all,
     finite,
     integer,
+    present,
     quaternion_to_rpy_deg,
+    quaternion_to_yaw_deg,
+    rounded,
     stamp_ns,
     text,
 )
@@ -92,5 +100,67 @@ def test_text_cuts_and_rejects() -> None:
     assert text(5) is None
 
 
-def test_compact_drops_none_and_empty_dicts_but_keeps_empty_lists() -> None:
-    assert compact({"a": None, "b": {}, "c": {"d": None}, "e": [], "f": 0}) == {"e": [], "f": 0}
+def test_present_drops_none_and_empty_dicts_but_keeps_empty_lists_and_zeros() -> None:
+    assert present(a=None, b={}, e=[], f=0, g=0.0) == {"e": [], "f": 0, "g": 0.0}
+
+
+def float32(value: float) -> float:
+    """``value`` as a float32 sensor reports it (what rclpy hands over as a float)."""
+    return float(np.float32(value))
+
+
+@pytest.mark.parametrize(
+    ("source", "written"),
+    [
+        (0.12, 0.12),  # LaserScan.range_min 0.12f, not 0.11999999731779099
+        (24.4283390045166, 24.428339),  # BatteryState.voltage
+        (3.7, 3.7),
+        (30.0, 30.0),
+        (-1.5, -1.5),
+        (1e-7, 1e-7),
+        (16777217.0, 16777216.0),  # float32 holds 24 bits
+    ],
+)
+def test_float32_fields_are_written_at_their_real_precision(source: float, written: float) -> None:
+    value = float32(source)
+    assert f32(value) == written
+    assert repr(f32(value)) == repr(written)  # the JSON text, too
+    assert f32_all([value, value]) == [written, written]
+    assert np.float32(f32(value)) == np.float32(value)  # and it reads back as the same float32
+
+
+def test_f32_all_takes_fields_and_an_array_and_drops_what_is_not_a_number() -> None:
+    from array import array
+
+    cells = array("f", [3.7, float("nan"), 4.2])
+    fields = [float32(24.4283390045166), math.nan, True, "1.5", 1e39, None, 7]
+    assert f32_all(fields, cells) == [24.428339, None, None, None, None, None, 7.0, 3.7, None, 4.2]
+    assert f32_all([0.5], np.array([0.1, 1e40])) == [0.5, 0.1, None]  # float64 items too
+
+
+@pytest.mark.parametrize(
+    ("value", "steps", "written"),
+    [
+        (1.23456789, MM, 1.235),
+        (-0.0004, MM, 0.0),  # no -0.0 in the JSON
+        (47.123456789, LATLON, 47.1234568),
+        (82.499999, PERCENT, 82.5),
+        (1e300, MM, 1e300),  # too large to scale: kept as it is
+        (math.nan, MM, None),
+        (True, MM, None),
+    ],
+)
+def test_derived_values_are_rounded_to_their_resolution(
+    value: object, steps: float, written: float | None
+) -> None:
+    got = rounded(value, steps)
+    assert got == written
+    if written is not None:
+        assert repr(got) == repr(written)
+
+
+def test_degrees_are_rounded_to_a_thousandth() -> None:
+    assert degrees(1.0) == 57.296
+    assert degrees(-math.pi) == -180.0
+    assert degrees(1e307) is None  # overflows when converted
+    assert quaternion_to_yaw_deg(NS(x=0.0, y=0.0, z=0.3826834, w=0.9238795)) == 45.0

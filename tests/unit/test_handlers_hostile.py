@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest import handlers
+from phytrace_edge.ingest.dispatch import handler_of
 from phytrace_edge.ingest.topics import TOPICS
 from phytrace_edge.udm.schema import find_violation
 from tests.conftest import FakeClock, non_finite_values
@@ -155,7 +155,7 @@ MESSAGES = {
 def _handle(topic: str, msg: Any) -> dict | None:
     spec = next(spec for spec in TOPICS if spec.name == topic)
     try:
-        reading = getattr(handlers, spec.handler)(msg)
+        reading = handler_of(spec.handler)(msg)
     except MalformedMessage:
         return None
     reading.pop("rejected_fields", None)

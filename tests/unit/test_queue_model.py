@@ -198,13 +198,19 @@ class QueueAccounting(RuleBasedStateMachine):
     @precondition(lambda self: self.dead)
     @rule()
     def requeue_dead_letters(self) -> None:
-        assert self.store.dead_letters.requeue() == len(self.dead)
-        for s in self.dead:
+        moved = self.store.dead_letters.requeue()
+        if self.limits.max_events is not None:
+            assert moved <= max(0, self.limits.max_events - len(self.queue))
+        if moved < len(self.dead):
+            depth, cap = self.store.stats().depth, self.limits.max_events
+            at_event_cap = cap is not None and depth >= cap
+            assert at_event_cap or self.limits.max_bytes < GIB, "stops short only at a cap"
+        for s in self.dead[:moved]:
             self.queued_at[s] = self.now
             self.incarnation[s] += 1
-        self.queue += self.dead
-        self.requeued += len(self.dead)
-        self.dead = []
+        self.queue += self.dead[:moved]
+        self.requeued += moved
+        self.dead = self.dead[moved:]
 
     @rule(seconds=st.sampled_from([1.0, LEASE_S + 1, TTL_S / 2]))
     def time_passes(self, seconds: float) -> None:

@@ -290,6 +290,22 @@ def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> Non
     assert box.purge() == 1 and box.count() == 0 and store.stats().dead_letters == 0
 
 
+def test_requeue_into_a_full_queue_moves_what_fits_and_keeps_the_rest(open_store) -> None:
+    store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5))
+    store.put_many([event(i) for i in range(3)])
+    batch = store.claim_batch(3, MIB)
+    store.ack(batch, [DeadLetter(e.id, "rejected: 422", 422) for e in batch.events])
+    store.put_many([event(i) for i in range(10, 13)])
+
+    assert store.dead_letters.requeue() == 2  # 3 queued + 2 = the cap of 5
+    stats = store.stats()
+    assert (stats.depth, stats.dead_letters) == (5, 1)
+    assert "cap_events" not in stats.drops, "a requeue never drops queued events"
+    assert seqs(store.claim_batch(10, MIB)) == [10, 11, 12, 0, 1]
+    (left,) = store.dead_letters.list()
+    assert left.event_id == str(uuid.UUID(int=2))
+
+
 def test_corrupt_file_is_moved_aside_and_a_fresh_queue_starts(
     tmp_path: Path, open_store, caplog: pytest.LogCaptureFixture
 ) -> None:
