@@ -1,7 +1,8 @@
 """One message, three field-type conventions: rclpy (the mock), rosbags, and DDS-like.
 
 Tests build a message once with the mock classes (rclpy's types: ``bytes`` levels,
-``array.array`` sequences, numpy fixed arrays) and convert it:
+``array.array`` sequences, numpy fixed arrays), pass it through the middleware as a
+subscriber receives it (float32 fields become the nearest float32), and convert it:
 
 - ``rosbags``: the real rosbags Jazzy type store classes (ints for bytes and uint8,
   numpy arrays for every numeric array).
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from phytrace_edge.sim import recorder
-from phytrace_edge.sim.mock_ros.messages import Message
+from phytrace_edge.sim.mock_ros.messages import Message, wire_copy
 
 FLAVOURS = ("rclpy", "rosbags", "dds")
 
@@ -47,6 +48,7 @@ def to_dds(msg: Any) -> Any:
 
 
 def as_flavour(msg: Message, flavour: str) -> Any:
+    msg = wire_copy(msg)
     if flavour == "rclpy":
         return msg
     if flavour == "rosbags":

@@ -159,7 +159,8 @@ def quaternion_to_rpy_deg(q: Any) -> tuple[float, float, float] | None:
     pitch, then roll), the same as tf2's ``getRPY``. The quaternion is normalised
     first; a zero or non-finite one has no orientation and gives None.
     """
-    x, y, z, w = (finite(getattr(q, axis, None)) for axis in ("x", "y", "z", "w"))
+    x, y = finite(getattr(q, "x", None)), finite(getattr(q, "y", None))
+    z, w = finite(getattr(q, "z", None)), finite(getattr(q, "w", None))
     if x is None or y is None or z is None or w is None:
         return None
     norm = math.sqrt(x * x + y * y + z * z + w * w)
@@ -170,10 +171,11 @@ def quaternion_to_rpy_deg(q: Any) -> tuple[float, float, float] | None:
     sin_pitch = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
     pitch = math.asin(sin_pitch)
     yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    # atan2 and asin are finite here: no need for snap's check
     return (
-        snap(wrap_degrees(math.degrees(roll)), MILLIDEGREE),
-        snap(math.degrees(pitch), MILLIDEGREE),
-        snap(wrap_degrees(math.degrees(yaw)), MILLIDEGREE),
+        round(((roll * _DEGREES_PER_RADIAN + 180.0) % 360.0 - 180.0) * MILLIDEGREE) / MILLIDEGREE,
+        round(pitch * _DEGREES_PER_RADIAN * MILLIDEGREE) / MILLIDEGREE,
+        round(((yaw * _DEGREES_PER_RADIAN + 180.0) % 360.0 - 180.0) * MILLIDEGREE) / MILLIDEGREE,
     )
 
 

@@ -57,20 +57,9 @@ def _rosbags_value(value: Any, typestore: Any) -> Any:
     return value
 
 
-def record_simulation(
-    path: str | Path,
-    seconds: float,
-    storage: str = "mcap",
-    seed: int = 0,
-    custom_topic: bool = True,
-) -> dict[str, int]:
-    """Write ``seconds`` of the simulated robot to a rosbag2 at ``path`` (a directory);
-    the number of messages per topic."""
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    typestore = get_typestore(Stores.ROS2_JAZZY)
-    typestore.register(get_types_from_msg(CUSTOM_DEFINITION, CUSTOM_TYPE))
+def simulate(seconds: float, seed: int = 0) -> list[tuple[str, int, Message]]:
+    """Run the simulated robot for ``seconds`` of virtual time; every message it
+    published as a subscriber received it: (topic, wall-clock ns, message)."""
     records: list[tuple[str, int, Message]] = []
     context = Context(virtual_time=True)
     init(context=context)
@@ -97,13 +86,32 @@ def record_simulation(
             executor.spin_once(timeout_sec=1.0)
     finally:
         shutdown(context=context)
+    return records
+
+
+def record_simulation(
+    path: str | Path,
+    seconds: float,
+    storage: str = "mcap",
+    seed: int = 0,
+    custom_topic: bool = True,
+) -> dict[str, int]:
+    """Write ``seconds`` of the simulated robot to a rosbag2 at ``path`` (a directory);
+    the number of messages per topic."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    typestore.register(get_types_from_msg(CUSTOM_DEFINITION, CUSTOM_TYPE))
+    records = simulate(seconds, seed)
+    types = {topic: msg._type for topic, _, msg in records}
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     counts: dict[str, int] = {}
     with Writer(Path(path), version=9, storage_plugin=plugin) as writer:
         connections = {
-            topic: writer.add_connection(topic, publisher.msg_type._type, typestore=typestore)
-            for topic, publisher in robot.pub.items()
+            topic: writer.add_connection(topic, msg_type, typestore=typestore)
+            for topic, msg_type in types.items()
         }
         custom = writer.add_connection(CUSTOM_TOPIC, CUSTOM_TYPE, typestore=typestore)
         for topic, stamp_ns, msg in records:
