@@ -150,10 +150,11 @@ def rclpy_handler_table() -> list[tuple[str, float]]:
     from phytrace_edge.sim.recorder import simulate
 
     latest = {topic: msg for topic, _, msg in simulate(10.0)}
-    return [
-        (topic, median_us(lambda h=handler_of(TOPIC_BY_NAME[topic].handler), m=msg: h(m)))
-        for topic, msg in sorted(latest.items())
-    ]
+    rows = []
+    for topic, msg in sorted(latest.items()):
+        handler = handler_of(TOPIC_BY_NAME[topic].handler)
+        rows.append((topic, median_us(lambda h=handler, m=msg: h(m))))
+    return rows
 
 
 def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
