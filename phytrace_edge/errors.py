@@ -79,6 +79,10 @@ class QueueFullError(QueueError):
     """The disk under the queue is full; free space or lower QUEUE_MAX_BYTES."""
 
 
+class QueueDamagedError(QueueError):
+    """SQLite found the queue file corrupt (or not a database) while using it."""
+
+
 class SendError(PhytraceError):
     """A batch did not reach PhyCloud this time."""
 

@@ -153,16 +153,22 @@ class Caps:
 
 
 def drop_oldest(cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> int:
-    """Delete up to ``count`` oldest events not under a lease; counted as ``reason``."""
+    """Delete at least ``count`` oldest events not under a lease (whole rows: a frame
+    goes at once), as many as there are; counted as ``reason``."""
     dropped = 0
     for low, high in leases.free_ranges(cursor, now):
         if dropped >= count:
             break
-        ids = cursor.execute(
-            "SELECT id FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+        rows = cursor.execute(
+            "SELECT last_id, count FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
             (low, high, count - dropped),
         ).fetchall()
-        if ids:
-            dropped += delete_range(cursor, ids[0][0], ids[-1][0])
+        last, covered = None, 0
+        for last_id, events in rows:
+            if dropped + covered >= count:
+                break
+            last, covered = last_id, covered + events
+        if last is not None:
+            dropped += delete_range(cursor, low, last)
     bump_counters(cursor, **{f"drop:{reason}": dropped})
     return dropped

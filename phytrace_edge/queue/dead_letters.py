@@ -17,6 +17,7 @@ import orjson
 from phytrace_edge.queue.caps import Caps
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
+from phytrace_edge.queue.records import DeadLetter, DeadLetterRow, QueuedEvent
 from phytrace_edge.queue.rows import insert_rows
 
 _COLUMNS = "id, event_id, queued_at, dead_at, reason, status_code, response, json_size"
@@ -115,6 +116,23 @@ class DeadLetterBox:
             purged = int(cursor.execute(f"DELETE FROM dead_letters {where}", params).rowcount)
             bump_counters(cursor, dead_letters=-purged)
         return purged
+
+
+def dead_letter_row(codecs: Codecs, event: QueuedEvent, dead: DeadLetter) -> DeadLetterRow:
+    """A rejected event of a batch, encoded on its own to be kept as a dead letter."""
+    encoded = codecs.encode(event.json)
+    return DeadLetterRow(
+        dead.queue_id,
+        event.event_id,
+        event.queued_at,
+        dead.reason,
+        dead.status_code,
+        dead.response,
+        encoded.codec,
+        encoded.dict_id,
+        len(event.json),
+        encoded.body,
+    )
 
 
 def _selection(ids: Sequence[int] | None) -> tuple[str, tuple[int, ...]]:

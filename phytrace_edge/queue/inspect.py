@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from typing import Any
 
 READ_TIMEOUT_S = 5.0
+DAMAGED_SUFFIX = ".damaged"  # written by ``recovery`` when a check finds damage
 
 
 class ServiceState:
@@ -42,6 +43,7 @@ class QueueStats:
 
     __slots__ = (
         "counters",
+        "damaged",
         "extra_drops",
         "file_bytes",
         "leased",
@@ -65,11 +67,13 @@ class QueueStats:
         service: ServiceState | None = None,
         max_bytes: int = 0,
         extra_drops: dict[str, int] | None = None,
+        damaged: str | None = None,
     ) -> None:
         self.path, self.counters, self.file_bytes = path, counters, file_bytes
         self.oldest_queued_at, self.newest_queued_at = oldest_queued_at, newest_queued_at
         self.quarantined, self.leased, self.service = quarantined, leased, service
         self.max_bytes, self.extra_drops = max_bytes, extra_drops or {}
+        self.damaged = damaged
 
     @property
     def depth(self) -> int:
@@ -121,7 +125,12 @@ def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueSt
         name: int(value) for name, value in connection.execute("SELECT name, value FROM counters")
     }
     oldest = connection.execute("SELECT queued_at FROM events ORDER BY id LIMIT 1").fetchone()
-    newest = connection.execute("SELECT queued_at FROM events ORDER BY id DESC LIMIT 1").fetchone()
+    # status reads a queue as it is: one from before frames (0004) has no newest_at
+    columns = {row[1] for row in connection.execute("PRAGMA table_info(events)")}
+    newest_at = "coalesce(newest_at, queued_at)" if "newest_at" in columns else "queued_at"
+    newest = connection.execute(
+        f"SELECT {newest_at} FROM events ORDER BY id DESC LIMIT 1"  # noqa: S608
+    ).fetchone()
     quarantined = connection.execute("SELECT value FROM meta WHERE key = 'quarantined'").fetchone()
     leased = connection.execute(
         "SELECT count(*) FROM leases WHERE expires_at > ?", (now,)
@@ -141,7 +150,19 @@ def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueSt
         quarantined=quarantined[0] if quarantined else None,
         leased=int(leased),
         service=service,
+        damaged=_damage_found(path),
     )
+
+
+def _damage_found(path: str) -> str | None:
+    """What the last integrity check found wrong, if it did (``recovery``)."""
+    try:
+        with open(f"{path}{DAMAGED_SUFFIX}", encoding="utf-8") as marker:
+            return marker.read().strip() or "damaged"
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        return f"cannot read the damage marker ({exc.strerror})"
 
 
 def read_stats(path: str, now: float) -> QueueStats | None:

@@ -20,8 +20,10 @@ def expire(db: Database, cutoff: float, now: float) -> int:
         expired = 0
         for low, high in leases.free_ranges(cursor, now):
             while True:
+                # a frame expires with its newest event: never before the TTL
                 rows = cursor.execute(
-                    "SELECT id, queued_at FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+                    "SELECT last_id, coalesce(newest_at, queued_at) FROM events "
+                    "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
                     (low, high, EXPIRE_CHUNK),
                 ).fetchall()
                 # ids grow with time: the first fresh row ends the expired prefix
@@ -29,7 +31,7 @@ def expire(db: Database, cutoff: float, now: float) -> int:
                 old = rows[:fresh_at]
                 if not old:
                     break
-                expired += delete_range(cursor, old[0][0], old[-1][0])
+                expired += delete_range(cursor, low, old[-1][0])
                 low = old[-1][0] + 1
                 if fresh_at < len(rows):
                     break

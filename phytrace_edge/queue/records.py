@@ -7,16 +7,18 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class QueuedEvent:
-    """One event as the sender gets it: its row id, UDM event_id and JSON."""
+    """One event as the sender gets it: its queue id, UDM event_id, JSON, and when it
+    was queued (a frame's events: when the frame's first was)."""
 
     id: int
     event_id: str
     json: bytes
+    queued_at: float = 0.0
 
 
 @dataclass(frozen=True)
 class Batch:
-    """Events claimed under one lease: rows ``first_id..last_id``, oldest first."""
+    """Events claimed under one lease: queue ids ``first_id..last_id``, oldest first."""
 
     first_id: int
     last_id: int
@@ -42,3 +44,19 @@ class DeadLetter:
     reason: str
     status_code: int | None = None
     response: str | None = None
+
+
+@dataclass(frozen=True)
+class DeadLetterRow:
+    """A dead letter as it is stored: the event encoded again on its own."""
+
+    queue_id: int
+    event_id: str
+    queued_at: float
+    reason: str
+    status_code: int | None
+    response: str | None
+    codec: int
+    dict_id: int | None
+    json_size: int
+    body: bytes

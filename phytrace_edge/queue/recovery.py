@@ -8,6 +8,13 @@ unreadable is *not* corrupt and is never moved. A queue written by a newer versi
 refused, not used. The path must be a regular file, or a missing one the bridge then
 creates with mode 0600; nothing else is ever chmod'ed or opened (``/dev/null`` as root
 would otherwise be made 0600 for every process of the robot).
+
+Checking costs time in proportion to the file (3.6 s for a million events), and the
+bridge starts and ``drain`` runs often, so the open checks the header, the schema and
+as much of ``PRAGMA quick_check`` as ``OPEN_CHECK_S`` allows; a small queue is checked
+whole. The maintenance loop finishes the check on its own connection
+(``check_integrity``). A file it finds damaged is marked (``<queue>.damaged``) and
+reported, and the next open checks it whole and moves it aside.
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ import time
 from pathlib import Path
 
 from phytrace_edge.errors import QueueBusyError, QueueError
+from phytrace_edge.queue.inspect import DAMAGED_SUFFIX
 from phytrace_edge.queue.migrate import latest_version
 from phytrace_edge.queue.sqlite_errors import (
     SQLITE_BUSY,
@@ -31,6 +39,9 @@ from phytrace_edge.queue.sqlite_errors import (
 
 log = logging.getLogger(__name__)
 
+OPEN_CHECK_S = 0.3
+PROGRESS_STEPS = 20_000  # SQLite VM steps between looks at the clock
+
 
 def connect(path: Path, busy_timeout_s: float) -> sqlite3.Connection:
     """A connection in autocommit mode (transactions are explicit)."""
@@ -41,15 +52,20 @@ def connect(path: Path, busy_timeout_s: float) -> sqlite3.Connection:
     return connection
 
 
-def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection, Path | None]:
-    """Open the queue at ``path`` in WAL mode; (connection, where a bad file was moved)."""
+def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection, Path | None, bool]:
+    """Open the queue at ``path`` in WAL mode; (connection, where a bad file was moved,
+    whether the whole file was checked)."""
     exists = _check_place(path)
-    quarantined = None
+    quarantined, whole = None, True
     if exists and path.stat().st_size > 0:
-        problem = _integrity_problem(path, busy_timeout_s)
+        marked = damage_marker(path)
+        budget = None if marked.exists() else OPEN_CHECK_S
+        problem, whole = _integrity_problem(path, busy_timeout_s, budget)
         if problem is not None:
             quarantined = quarantine(path, problem)
             exists = False
+        if whole:
+            marked.unlink(missing_ok=True)
     if not exists:
         _create_private(path)
     try:
@@ -61,7 +77,65 @@ def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection,
         raise QueueError(
             f"queue {path}: cannot use WAL mode (got {mode}) - is it on a network share?"
         )
-    return connection, quarantined
+    return connection, quarantined, whole
+
+
+def damage_marker(path: Path) -> Path:
+    """The file that says a check found ``path`` damaged while it was in use."""
+    return Path(f"{path}{DAMAGED_SUFFIX}")
+
+
+def quick_check(connection: sqlite3.Connection, budget_s: float | None) -> str | None:
+    """``PRAGMA quick_check``'s verdict ("ok" or the first problems), or None when it
+    ran past ``budget_s`` and was stopped."""
+    if budget_s is not None:
+        deadline = time.monotonic() + budget_s
+        connection.set_progress_handler(lambda: time.monotonic() > deadline, PROGRESS_STEPS)
+    try:
+        return str(connection.execute("PRAGMA quick_check(10)").fetchone()[0])
+    except sqlite3.OperationalError as exc:
+        if budget_s is not None and "interrupted" in str(exc):
+            return None
+        raise
+    finally:
+        connection.set_progress_handler(None, 0)
+
+
+def check_integrity(path: Path, busy_timeout_s: float) -> str | None:
+    """The whole check, on a connection of its own (the queue stays in use): None when
+    the file is sound, else the problem, which is also reported and marked for the
+    next open to move the file aside."""
+    connection = connect(path, busy_timeout_s)
+    try:
+        verdict = quick_check(connection, None)
+    except sqlite3.DatabaseError as exc:
+        verdict = str(exc)
+    finally:
+        connection.close()
+    if verdict == "ok":
+        return None
+    problem = f"quick_check: {verdict}"
+    mark_damaged(path, problem)
+    return problem
+
+
+def mark_damaged(path: Path, problem: str) -> None:
+    """Report damage found while the queue is in use, and mark the file so that the
+    next open checks it whole (and moves it aside). Marked once: later errors of the
+    same damage are not reported again."""
+    marker = damage_marker(path)
+    if marker.exists():
+        return
+    try:
+        marker.write_text(problem + "\n", "utf-8")
+    except OSError as exc:
+        log.error("queue %s: cannot write %s (%s)", path, marker, exc.strerror)
+    log.error(
+        "queue %s is damaged (%s): restart the bridge to move it aside and start a fresh "
+        "queue; events that can still be read are sent meanwhile",
+        path,
+        problem,
+    )
 
 
 def _check_place(path: Path) -> bool:
@@ -84,35 +158,38 @@ def _check_place(path: Path) -> bool:
     return True
 
 
-def _integrity_problem(path: Path, busy_timeout_s: float) -> str | None:
-    """What is wrong with an existing file, or None if it is a sound queue database.
-    Raises QueueError for a queue of a newer version (not ours to change)."""
+def _integrity_problem(
+    path: Path, busy_timeout_s: float, budget_s: float | None
+) -> tuple[str | None, bool]:
+    """(What is wrong with an existing file or None if it is a sound queue database,
+    whether the check covered the whole file). Raises QueueError for a queue of a newer
+    version (not ours to change)."""
     try:
         connection = connect(path, busy_timeout_s)
         try:
-            result = connection.execute("PRAGMA quick_check").fetchone()[0]
             version = connection.execute("PRAGMA user_version").fetchone()[0]
             tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
+            result = quick_check(connection, budget_s)
         finally:
             connection.close()
     except sqlite3.Error as exc:
         code = sqlite_code(exc)
         if code in (SQLITE_CORRUPT, SQLITE_NOTADB):
-            return str(exc)
+            return str(exc), True
         if code in (SQLITE_BUSY, SQLITE_LOCKED):
             raise QueueBusyError(f"queue {path}: locked by another process") from exc
         raise QueueError(f"queue {path}: cannot read ({exc})") from exc
-    if result != "ok":
-        return f"quick_check: {result}"
+    if result not in ("ok", None):
+        return f"quick_check: {result}", True
     if (version == 0 and tables) or (version > 0 and "counters" not in tables):
-        return f"not a phytrace-edge queue (tables: {', '.join(sorted(tables))[:200]})"
+        return f"not a phytrace-edge queue (tables: {', '.join(sorted(tables))[:200]})", True
     if version > latest_version():
         raise QueueError(
             f"queue {path}: written by a newer phytrace-edge (schema version {version}; this "
             f"one knows up to {latest_version()}) - upgrade phytrace-edge or set QUEUE_PATH "
             "to another file"
         )
-    return None
+    return None, result is not None
 
 
 def quarantine(path: Path, problem: str) -> Path:

@@ -72,3 +72,17 @@ class SpaceReserve:
             )
             return True
         return False
+
+
+def warn_if_volume_smaller_than(queue_path: Path, queue_bytes: int, max_bytes: int) -> None:
+    """Log a WARNING when the volume could not hold a queue of ``max_bytes``."""
+    free = os.statvfs(queue_path.parent)
+    available = free.f_bavail * free.f_frsize + queue_bytes
+    if available < max_bytes:
+        log.warning(
+            "queue %s: the volume has %s free for the queue but QUEUE_MAX_BYTES is %s; "
+            "the disk will fill before the cap - lower QUEUE_MAX_BYTES or free space",
+            queue_path,
+            format_bytes(available),
+            format_bytes(max_bytes),
+        )

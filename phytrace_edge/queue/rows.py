@@ -15,10 +15,11 @@ MAX_ID = 2**63 - 1
 def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **counters: int) -> None:
     """Insert (event_id, queued_at, codec, dict_id, json_size, body) rows with ids from
     next_id, keeping depth and stored_bytes exact, and add ``counters``."""
+    next_id = cursor.execute("SELECT value FROM counters WHERE name = 'next_id'").fetchone()[0]
     cursor.executemany(
-        "INSERT INTO events(id, event_id, queued_at, codec, dict_id, json_size, body) VALUES "
-        "((SELECT value FROM counters WHERE name = 'next_id') + ?, ?, ?, ?, ?, ?, ?)",
-        [(offset, *row) for offset, row in enumerate(rows)],
+        "INSERT INTO events(id, last_id, event_id, queued_at, codec, dict_id, json_size, body) "
+        "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        [(next_id + offset, next_id + offset, *row) for offset, row in enumerate(rows)],
     )
     bump_counters(
         cursor,
@@ -30,12 +31,16 @@ def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **count
 
 
 def delete_range(cursor: sqlite3.Cursor, first_id: int, last_id: int) -> int:
-    """Delete rows first_id..last_id, keeping depth and stored_bytes exact; the count."""
+    """Delete the rows wholly within ids first_id..last_id, keeping depth and
+    stored_bytes exact; the number of events they held. (A frame sealed after a lease
+    ran out may reach past the lease's range: it stays, and is sent again.)"""
+    span = (first_id, last_id, last_id)
     count, size = cursor.execute(
-        "SELECT count(*), coalesce(sum(length(body)), 0) FROM events WHERE id BETWEEN ? AND ?",
-        (first_id, last_id),
+        "SELECT coalesce(sum(count), 0), coalesce(sum(length(body)), 0) FROM events "
+        "WHERE id BETWEEN ? AND ? AND last_id <= ?",
+        span,
     ).fetchone()
-    cursor.execute("DELETE FROM events WHERE id BETWEEN ? AND ?", (first_id, last_id))
+    cursor.execute("DELETE FROM events WHERE id BETWEEN ? AND ? AND last_id <= ?", span)
     bump_counters(cursor, depth=-count, stored_bytes=-size)
     return int(count)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sqlite3
 
-from phytrace_edge.errors import QueueBusyError, QueueError, QueueFullError
+from phytrace_edge.errors import QueueBusyError, QueueDamagedError, QueueError, QueueFullError
 
 # SQLite result codes (the sqlite3 module names them only from Python 3.11)
 SQLITE_PERM, SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY = 3, 5, 6, 8
@@ -56,4 +56,6 @@ def queue_error(exc: sqlite3.Error, path: object) -> QueueError:
         return QueueFullError(message)
     if code in (SQLITE_BUSY, SQLITE_LOCKED):
         return QueueBusyError(message)
+    if code in (SQLITE_CORRUPT, SQLITE_NOTADB):
+        return QueueDamagedError(message)
     return QueueError(message)

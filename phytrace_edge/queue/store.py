@@ -6,7 +6,12 @@ Build appends (``put``/``put_many``); ship takes the oldest events under a lease
 
 Durability: ``put`` returns after its transaction committed; with QUEUE_SYNC=full
 (the default) that includes an fsync of the WAL, so an acknowledged event survives a
-kill -9 and a power loss. Grouped puts share one fsync (group commit).
+kill -9 and a power loss. Grouped puts share one fsync (group commit). Claims, acks
+and lease renewals commit without an fsync of their own: losing one to a power cut
+only makes the bridge send a batch again, which PhyCloud deduplicates, and the next
+put's fsync makes them durable anyway (docs/queue.md, "Durability").
+
+Events that wait (an outage) are packed into frames by the writer (``frames``).
 
 Every event that leaves the queue other than by ``ack`` is counted by reason:
 ``cap_bytes``, ``cap_events`` (caps), ``ttl`` (expired), ``disk_full`` (SQLITE_FULL),
@@ -19,7 +24,6 @@ from __future__ import annotations
 import contextlib
 import itertools
 import logging
-import os
 import sqlite3
 import time
 from collections.abc import Callable, Sequence
@@ -28,34 +32,35 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.errors import QueueError, QueueFullError
+from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
 from phytrace_edge.queue import claims, leases, maintenance
 from phytrace_edge.queue.caps import Caps, drop_oldest, wal_reserve
-from phytrace_edge.queue.codecs import Codecs, Encoded, packaged_dictionary
-from phytrace_edge.queue.database import Database, bump_counters
-from phytrace_edge.queue.dead_letters import DeadLetterBox
+from phytrace_edge.queue.codecs import Codecs, Encoded
+from phytrace_edge.queue.database import Database, bump_counters, configure
+from phytrace_edge.queue.dead_letters import DeadLetterBox, dead_letter_row
 from phytrace_edge.queue.defaults import (
     DEFAULT_BUSY_TIMEOUT_S,
     DEFAULT_COMPRESSION,
     DEFAULT_LEASE_S,
     DEFAULT_SYNC,
 )
+from phytrace_edge.queue.dictionaries import load_dictionaries
+from phytrace_edge.queue.frames import FRAME_EVENTS, SEAL_AFTER_S, Sealer, decode_rows
+from phytrace_edge.queue.full_disk import FullDisk
 from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.migrate import migrate
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.ownership import Owner, is_alive, sweep_dead_owners
-from phytrace_edge.queue.records import Batch, DeadLetter, PutResult, QueuedEvent
-from phytrace_edge.queue.recovery import open_checked
-from phytrace_edge.queue.reserve import SpaceReserve
+from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
+from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
+from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
 from phytrace_edge.queue.rows import insert_rows
 from phytrace_edge.queue.service_state import write_service_state
 from phytrace_edge.queue.sqlite_errors import queue_error
-from phytrace_edge.units import format_bytes
 
 log = logging.getLogger(__name__)
 
-CACHE_KIB = 8000  # SQLite's page cache: 8 MiB, whatever the backlog
-FULL_LOG_EVERY_S = 60.0
+INTEGRITY_EVERY_S = 24 * 3600.0
 
 
 class QueueStore:
@@ -69,6 +74,7 @@ class QueueStore:
         compression: str = DEFAULT_COMPRESSION,
         clock: Callable[[], float] = time.time,
         lease_s: float = DEFAULT_LEASE_S,
+        frame_events: int = FRAME_EVENTS,
     ) -> None:
         self._db = db
         self.path = db.path
@@ -77,17 +83,20 @@ class QueueStore:
         self._clock = clock
         self._owner = Owner(db.path)
         self._claims = itertools.count(1)
-        self._next_full_log = 0.0
-        self._refused_since_log = 0
+        self.busy_timeout_s = DEFAULT_BUSY_TIMEOUT_S
+        self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S  # monotonic
         self.codecs = Codecs(compression)
         self._caps = Caps(limits, db.page_size)
         self._wal_reserve = wal_reserve(limits.max_bytes)
+        self._full_disk = FullDisk(db, self._wal_reserve)
         db.execute(f"PRAGMA journal_size_limit = {self._wal_reserve}")
         # checkpoints often enough that moving the WAL into the database never needs
         # more room than the full-disk reserve holds
         room = min(self._wal_reserve, db.reserve.size if db.reserve else self._wal_reserve)
         db.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // db.page_size // 2)}")
-        self._load_dictionaries()
+        load_dictionaries(db, self.codecs, clock())
+        self._sealer = Sealer(self.codecs, frame_events)
+        self._seal_after = 0.0  # store clock: no sealing before (the disk was full)
         self.dead_letters = DeadLetterBox(db, self.codecs, self._caps, clock)
 
     @classmethod
@@ -101,35 +110,55 @@ class QueueStore:
         clock: Callable[[], float] = time.time,
         lease_s: float = DEFAULT_LEASE_S,
         busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S,
+        frame_events: int = FRAME_EVENTS,
     ) -> QueueStore:
         """Open (creating, checking, migrating) the queue at ``path``.
 
         A corrupt or non-SQLite file is moved aside and a fresh queue started (see
-        ``recovery``); the store remembers the moved file for ``stats``.
+        ``recovery``); the store remembers the moved file for ``stats``. Tests pass a
+        small ``frame_events`` to see frames form.
         """
-        path = Path(path)
-        connection, quarantined = open_checked(path, busy_timeout_s)
-        connection.execute(f"PRAGMA synchronous = {'FULL' if sync == 'full' else 'NORMAL'}")
-        connection.execute(f"PRAGMA cache_size = -{CACHE_KIB}")
-        migrate(connection)
-        reserve = SpaceReserve.sized_for(path, wal_reserve((limits or QueueLimits()).max_bytes))
-        store = cls(
-            Database(connection, path, reserve),
-            limits=limits or QueueLimits(),
-            compression=compression,
-            clock=clock,
-            lease_s=lease_s,
-        )
+        options = {"limits": limits or QueueLimits(), "compression": compression}
+        options |= {"clock": clock, "lease_s": lease_s, "frame_events": frame_events}
+        try:
+            return cls._open_once(Path(path), sync, busy_timeout_s, options)
+        except QueueDamagedError:
+            # damage the bounded check at open did not reach: now marked, so this
+            # open checks the file whole and moves it aside
+            return cls._open_once(Path(path), sync, busy_timeout_s, options)
+
+    @classmethod
+    def _open_once(
+        cls, path: Path, sync: str, busy_timeout_s: float, options: dict[str, Any]
+    ) -> QueueStore:
+        connection, quarantined, checked_whole = open_checked(path, busy_timeout_s)
+        try:
+            configure(connection, sync)
+            migrate(connection)
+        except sqlite3.Error as exc:
+            connection.close()
+            error = queue_error(exc, path)
+            if isinstance(error, QueueDamagedError):
+                mark_damaged(path, str(exc))
+            raise error from exc
+        reserve = SpaceReserve.sized_for(path, wal_reserve(options["limits"].max_bytes))
+        try:
+            store = cls(Database(connection, path, reserve), **options)
+        except QueueError:
+            connection.close()
+            raise
         if quarantined is not None:
             with store._db.transaction() as cursor:
                 cursor.execute(
                     "INSERT OR REPLACE INTO meta(key, value) VALUES ('quarantined', ?)",
                     (str(quarantined),),
                 )
+        store.busy_timeout_s = busy_timeout_s
+        store.next_check_at = time.monotonic() + (INTEGRITY_EVERY_S if checked_whole else 0.0)
         store.take_back_orphaned_leases()
         sweep_dead_owners(path)
         reserve.restore()
-        store.warn_if_disk_smaller_than_cap()
+        warn_if_volume_smaller_than(path, store.file_bytes(), options["limits"].max_bytes)
         return store
 
     def close(self) -> None:
@@ -145,19 +174,6 @@ class QueueStore:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    def warn_if_disk_smaller_than_cap(self) -> None:
-        """Log a WARNING when the volume could not hold a full queue."""
-        free = os.statvfs(self.path.parent)
-        available = free.f_bavail * free.f_frsize + self.file_bytes()
-        if available < self.limits.max_bytes:
-            log.warning(
-                "queue %s: the volume has %s free for the queue but QUEUE_MAX_BYTES is %s; "
-                "the disk will fill before the cap - lower QUEUE_MAX_BYTES or free space",
-                self.path,
-                format_bytes(available),
-                format_bytes(self.limits.max_bytes),
-            )
 
     # ------------------------------------------------------------------ put
 
@@ -180,16 +196,7 @@ class QueueStore:
                 with contextlib.suppress(QueueFullError):
                     return self._insert(rows)
             self._count_drop("disk_full", len(rows))
-            self._refused_since_log += len(rows)
-            if time.monotonic() >= self._next_full_log:  # once a minute, not per event
-                self._next_full_log = time.monotonic() + FULL_LOG_EVERY_S
-                log.error(
-                    "queue %s: disk full, %d new event(s) dropped since the last report - "
-                    "free space on the volume or lower QUEUE_MAX_BYTES",
-                    self.path,
-                    self._refused_since_log,
-                )
-                self._refused_since_log = 0
+            self._full_disk.report_refused(self.path, len(rows))
             return PutResult(0, len(rows))
 
     def _encode(self, event: dict[str, Any]) -> tuple[str, int, Encoded]:
@@ -199,6 +206,8 @@ class QueueStore:
     def _insert(self, rows: list[tuple[str, int, Encoded]]) -> PutResult:
         now = self._clock()
         sizes = [len(encoded.body) for _, _, encoded in rows]
+        if self._full_disk.refuses(sizes):
+            raise QueueFullError(f"queue {self.path}: disk full")
         with self._db.transaction() as cursor:
             accepted = self._caps.make_room(cursor, rows, sizes, now)
             insert_rows(
@@ -206,20 +215,28 @@ class QueueStore:
                 [(eid, now, e.codec, e.dict_id, size, e.body) for eid, size, e in accepted],
                 queued_total=len(rows),  # every event put, whatever the caps did with it
             )
-        self._bound_wal()
+        self._seal(now)
+        self._db.bound_wal(self._wal_reserve)
         return PutResult(len(accepted), len(rows) - len(accepted))
 
-    def _bound_wal(self) -> None:
-        """Truncate the WAL once it outgrows its share of the byte cap. (SQLite's
-        autocheckpoint copies pages back but leaves the WAL file at its largest.)"""
-        with contextlib.suppress(FileNotFoundError):
-            wal = os.stat(f"{self.path}-wal")  # noqa: PTH116 - on the hot path
-            if wal.st_size > self._wal_reserve:
-                with contextlib.suppress(QueueError):
-                    self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-
-    # Making room for new events never touches the full-disk reserve: it is kept for
-    # what lets the queue drain (claims, acks), or new events would take it at once.
+    def _seal(self, now: float) -> None:
+        """Pack what has waited into frames, in a transaction of its own after the put:
+        the put is durable whatever happens here."""
+        if now < self._seal_after:
+            return
+        if not self._full_disk.has_room_to_seal(self.path):
+            self._seal_after = now + SEAL_AFTER_S
+            return
+        looked_below = self._sealer.sealed_below
+        try:
+            with self._db.transaction() as cursor:
+                sealed = self._sealer.seal(cursor, now)
+        except QueueError:
+            self._sealer.sealed_below = looked_below  # rolled back: look again later
+            self._seal_after = now + SEAL_AFTER_S
+            return
+        if sealed:
+            self._caps.room.forget()
 
     def _evict_oldest(self, count: int, reason: str) -> bool:
         try:
@@ -258,21 +275,22 @@ class QueueStore:
         rows = self._db.write(
             lambda cursor: claims.lease_oldest(
                 cursor, max_events, max_bytes, token, now, now + self.lease_s
-            )
+            ),
+            durable=False,
         )
         if not rows:
             return None
-        events = [
-            QueuedEvent(row_id, event_id, self.codecs.decode(codec, dict_id, body))
-            for row_id, event_id, codec, dict_id, _, body in rows
-        ]
-        return Batch(rows[0][0], rows[-1][0], token, events)
+        events = decode_rows(self.codecs, rows)  # outside the lock: others go on
+        return Batch(rows[0][0], rows[-1][1], token, events)
 
     def ack(self, batch: Batch, dead_letters: Sequence[DeadLetter] = ()) -> None:
         """PhyCloud has the batch: delete it, moving ``dead_letters`` aside first."""
         now = self._clock()
-
-        self._db.write(lambda cursor: claims.delete_accepted(cursor, batch, dead_letters, now))
+        by_id = {event.id: event for event in batch.events} if dead_letters else {}
+        rows = [dead_letter_row(self.codecs, by_id[d.queue_id], d) for d in dead_letters]
+        self._db.write(
+            lambda cursor: claims.delete_accepted(cursor, batch, rows, now), durable=False
+        )
 
     def take_back_orphaned_leases(self) -> int:
         """Free the events claimed by processes that died (killed, crashed, a container
@@ -297,14 +315,17 @@ class QueueStore:
 
     def release(self, batch: Batch) -> None:
         """Give the batch back unsent: its events are claimable again at once."""
-        self._db.write(lambda cursor: leases.give_back(cursor, batch.first_id, batch.owner))
+        self._db.write(
+            lambda cursor: leases.give_back(cursor, batch.first_id, batch.owner), durable=False
+        )
 
     def renew(self, batch: Batch) -> bool:
         """Extend the lease while a send is still retrying; False if it had expired
         (another sender may have the events now: send them anyway, PhyCloud dedupes)."""
         now, until = self._clock(), self._clock() + self.lease_s
         return self._db.write(
-            lambda cursor: leases.extend(cursor, batch.first_id, batch.owner, now, until)
+            lambda cursor: leases.extend(cursor, batch.first_id, batch.owner, now, until),
+            durable=False,
         )
 
     # ------------------------------------------------------------------ upkeep
@@ -325,10 +346,14 @@ class QueueStore:
         return max(0, before - self.file_bytes())
 
     def maintain(self) -> None:
-        """Periodic upkeep: TTL expiry, space reclaim, and the full-disk reserve made
-        again once the disk has room."""
+        """Periodic upkeep: TTL expiry, space reclaim, the integrity check the open did
+        not finish (then daily), and the full-disk reserve made again once the disk
+        has room."""
         self.expire()
         self.reclaim_space()
+        if time.monotonic() >= self.next_check_at:
+            self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S
+            check_integrity(self.path, self.busy_timeout_s)
         reserve = self._db.reserve
         if reserve is not None and not reserve.held() and reserve.restore():
             log.info("queue %s: the disk has room again; the reserve is back", self.path)
@@ -338,20 +363,6 @@ class QueueStore:
     def write_service_state(self, document: dict[str, Any], running: bool) -> None:
         """Record the running service's figures for ``status`` (another process)."""
         write_service_state(self._db, document, running, self._clock())
-
-    def _load_dictionaries(self) -> None:
-        for dict_id, content in self._db.read("SELECT dict_id, content FROM zstd_dictionaries"):
-            self.codecs.add_dictionary(dict_id, content)
-        if not self._db.read(
-            "SELECT 1 FROM zstd_dictionaries WHERE dict_id = ?", (self.codecs.dict_id,)
-        ):
-            dict_id, content = packaged_dictionary()
-            with self._db.transaction() as cursor:
-                cursor.execute(
-                    "INSERT OR IGNORE INTO zstd_dictionaries(dict_id, content, added_at) "
-                    "VALUES (?, ?, ?)",
-                    (dict_id, content, self._clock()),
-                )
 
     def counter(self, name: str) -> int:
         """One of the queue's exact counters (``depth``, ``stored_bytes``, ...)."""

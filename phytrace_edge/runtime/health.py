@@ -84,6 +84,10 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         )
     if stats.quarantined:
         problems.append(f"a corrupt queue file was moved aside: {stats.quarantined}")
+    if stats.damaged:
+        problems.append(
+            f"the queue file is damaged ({stats.damaged}): restart the bridge to move it aside"
+        )
 
     return {
         "healthy": not problems and running,
@@ -104,6 +108,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
             "fill": round(fill, 4),
             "oldest_age_s": oldest_age,
             "quarantined": stats.quarantined,
+            "damaged": stats.damaged,
         },
         "drops": _drops(stats.drops, service),
         "dead_letters": stats.dead_letters,

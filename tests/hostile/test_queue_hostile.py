@@ -37,11 +37,11 @@ def one_line(result: subprocess.CompletedProcess[str]) -> str:
 
 
 HOLD_LOCK = """
-import sqlite3, sys, time
+import sqlite3, sys
 db = sqlite3.connect(sys.argv[1], isolation_level=None)
 db.execute("BEGIN IMMEDIATE")
 print("locked", flush=True)
-time.sleep(float(sys.argv[2]))
+sys.stdin.readline()  # until the test has seen what it waits for
 db.execute("ROLLBACK")
 """
 
@@ -65,20 +65,22 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
     try:
         wait_for(lambda: service.sender.stats.events_sent > 10, 30, "the first sends")
         holder = subprocess.Popen(
-            [sys.executable, "-c", HOLD_LOCK, str(tmp_path / "queue.db"), "12"],
+            [sys.executable, "-c", HOLD_LOCK, str(tmp_path / "queue.db")],
+            stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,
         )
         assert holder.stdout.readline().strip() == "locked"
-        wait_for(lambda: service.sender.stats.queue_errors > 0, 30, "the sender to meet the lock")
-        service.heartbeat(running=True)  # as the heartbeat thread would, a moment later
-        during = report(
+        # the writer, the heartbeat and the sender each wait out the busy timeout in turn
+        wait_for(lambda: service.sender.stats.queue_errors > 0, 60, "the sender to meet the lock")
+        holder.communicate("release\n", timeout=30)
+        service.heartbeat(running=True)  # as the heartbeat thread does once it can write
+        after = report(
             read_stats(wiring.queue_path(settings), time.time()),
             wiring.health_thresholds(settings),
             time.time(),
         )
-        assert any("cannot use the queue" in p for p in during["problems"]), during["problems"]
-        holder.wait(30)
+        assert any("cannot use the queue" in p for p in after["problems"]), after["problems"]
         sent = service.sender.stats.events_sent
         wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
     finally:

@@ -11,6 +11,7 @@ dead-lettered) and each is counted; a full queue drops only what its policy allo
 from __future__ import annotations
 
 import base64
+import itertools
 import random
 import shutil
 import sqlite3
@@ -20,7 +21,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-from hypothesis import settings
+from hypothesis import event, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import (
     Bundle,
@@ -32,12 +33,14 @@ from hypothesis.stateful import (
     rule,
 )
 
+from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import Batch, DeadLetter
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import GIB, KIB, MIB
 
 LEASE_S = 10.0
+FRAME_EVENTS = 3  # small frames, so that runs of a few dozen steps make many
 TTL_S = 100.0
 
 
@@ -87,7 +90,12 @@ class QueueAccounting(RuleBasedStateMachine):
     def _open(self, path: Path) -> QueueStore:
         # durability across crashes is what the copies test; fsyncs would only slow it
         return QueueStore.open(
-            path, limits=self.limits, sync="normal", clock=lambda: self.now, lease_s=LEASE_S
+            path,
+            limits=self.limits,
+            sync="normal",
+            clock=lambda: self.now,
+            lease_s=LEASE_S,
+            frame_events=FRAME_EVENTS,
         )
 
     # ------------------------------------------------------------------ the model
@@ -101,9 +109,26 @@ class QueueAccounting(RuleBasedStateMachine):
             if (s, self.incarnation[s]) in c.rows
         }
 
+    def stored_spans(self) -> list[tuple[int, int, list[int]]]:
+        """(first id, last id, seqs) of each row of the queue, oldest first."""
+        rows = self.store._db.read(
+            "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body "
+            "FROM events ORDER BY id"
+        )
+        spans = []
+        for row in rows:
+            seqs = [seq_of(e.event_id) for e in decode_rows(self.store.codecs, [row])]
+            spans.append((row[0], row[1], seqs))
+        for (_, last, _), (first, _, _) in itertools.pairwise(spans):
+            assert last < first, "rows' id ranges never overlap"
+        return spans
+
+    def stored_rows(self) -> list[list[int]]:
+        """The seqs of each row of the queue, oldest first: one, or a frame's."""
+        return [seqs for _, _, seqs in self.stored_spans()]
+
     def stored_seqs(self) -> list[int]:
-        rows = self.store._db.read("SELECT event_id FROM events ORDER BY id")
-        return [seq_of(event_id) for (event_id,) in rows]
+        return [s for row in self.stored_rows() for s in row]
 
     # ------------------------------------------------------------------ rules
 
@@ -155,14 +180,14 @@ class QueueAccounting(RuleBasedStateMachine):
     def claim(self, limit: int) -> Claim | None:
         leased = self.leased()
         expected: list[int] = []
-        for s in self.queue:  # the oldest run of unleased events, up to a leased one
-            if s in leased:
+        for row in self.stored_rows():  # the oldest whole rows, up to a leased one
+            if set(row) & leased:
                 if expected:
                     break
                 continue
-            expected.append(s)
-            if len(expected) == limit:
+            if expected and len(expected) + len(row) > limit:
                 break
+            expected += row
         batch = self.store.claim_batch(limit, 64 * MIB)
         got = [] if batch is None else [seq_of(e.event_id) for e in batch.events]
         assert got == expected
@@ -176,10 +201,18 @@ class QueueAccounting(RuleBasedStateMachine):
     def ack(self, claim: Claim | None, reject: list[int]) -> None:
         if claim is None:
             return
-        events = claim.batch.events
+        events, batch = claim.batch.events, claim.batch
+        # what the ack deletes: rows wholly in its range (a frame sealed after its
+        # lease ran out may reach past it, and stays to be sent again)
+        within = {
+            s
+            for first, last, seqs in self.stored_spans()
+            if batch.first_id <= first and last <= batch.last_id
+            for s in seqs
+        }
         dead = [DeadLetter(events[i].id, "rejected: test") for i in reject if i < len(events)]
-        self.store.ack(claim.batch, dead)
-        still = {q for q in self.queue if (q, self.incarnation[q]) in claim.rows}
+        self.store.ack(batch, dead)
+        still = {q for q in self.queue if (q, self.incarnation[q]) in claim.rows and q in within}
         dead_seqs = [seq_of(events[i].event_id) for i in reject if i < len(events)]
         dead_seqs = [s for s in dead_seqs if s in still]
         self.dead += dead_seqs
@@ -219,7 +252,12 @@ class QueueAccounting(RuleBasedStateMachine):
     @rule()
     def expire(self) -> None:
         leased, cutoff = self.leased(), self.now - TTL_S
-        old = [s for s in self.queue if self.queued_at[s] < cutoff and s not in leased]
+        old = [  # a frame goes when its newest event is past the TTL
+            s
+            for row in self.stored_rows()
+            if max(self.queued_at[q] for q in row) < cutoff and not set(row) & leased
+            for s in row
+        ]
         assert self.store.expire() == len(old)
         self.fate["drop:ttl"] += len(old)
         self.queue = [s for s in self.queue if s not in set(old)]
@@ -240,9 +278,12 @@ class QueueAccounting(RuleBasedStateMachine):
                 writer.execute("PRAGMA cache_size = 1")
                 writer.execute("BEGIN IMMEDIATE")
                 writer.executemany(
-                    "INSERT INTO events(event_id, queued_at, codec, json_size, body) "
-                    "VALUES (?, ?, 0, 2, ?)",
-                    [(str(uuid.UUID(int=2**100 + i)), self.now, b"x" * 4000) for i in range(50)],
+                    "INSERT INTO events(id, last_id, event_id, queued_at, codec, json_size, body) "
+                    "VALUES (?, ?, ?, ?, 0, 2, ?)",
+                    [
+                        (i, i, str(uuid.UUID(int=2**100 + i)), self.now, b"x" * 4000)
+                        for i in range(2**40, 2**40 + 50)
+                    ],
                 )
                 self._copy(path, copy)
                 writer.execute("ROLLBACK")
@@ -268,7 +309,17 @@ class QueueAccounting(RuleBasedStateMachine):
     def the_store_holds_what_the_model_says(self) -> None:
         if not hasattr(self, "store"):
             return
-        assert self.stored_seqs() == self.queue
+        rows = self.stored_rows()
+        assert [s for row in rows for s in row] == self.queue
+        event("frames in the queue" if any(len(row) > 1 for row in rows) else "no frames")
+        for row in (row for row in rows if len(row) > 1):
+            assert len(row) <= FRAME_EVENTS
+            newest = max(self.queued_at[s] for s in row)
+            assert newest <= self.now - SEAL_AFTER_S, "fresh events are never sealed"
+            live = (c for c in self.open_claims if c.expires_at > self.now)
+            for claim in live:  # a live lease holds a frame whole, or none of it
+                held = set(row) & set(claim.seqs)
+                assert not held or held == set(row), "a lease splits a frame"
 
     @invariant()
     def every_event_is_in_exactly_one_place_and_counted(self) -> None:

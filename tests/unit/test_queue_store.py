@@ -6,67 +6,33 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import random
 import sqlite3
 import stat
 import threading
 import uuid
-from collections.abc import Callable
 from pathlib import Path
 
 import orjson
 import pytest
 import zstandard
 
-from phytrace_edge.errors import QueueBusyError
+from phytrace_edge.errors import QueueBusyError, QueueError
+from phytrace_edge.queue import recovery
 from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
+from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.migrate import migrate, migration_files
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import DeadLetter
 from phytrace_edge.queue.recovery import connect
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import MIB
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 1_800_000_000.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
-def event(n: int, pad: int = 0) -> dict:
-    return {
-        "event_id": str(uuid.UUID(int=n)),
-        "event_type": "telemetry.periodic",
-        "seq": n,
-        "note": "x" * pad,
-    }
+from tests.unit.queue_fixtures import Clock, event, seqs
 
 
 @pytest.fixture
 def clock() -> Clock:
     return Clock()
-
-
-@pytest.fixture
-def open_store(tmp_path: Path, clock: Clock) -> Callable[..., QueueStore]:
-    opened: list[QueueStore] = []
-
-    def make(name: str = "queue.db", **kwargs: object) -> QueueStore:
-        limits = kwargs.pop("limits", QueueLimits(max_bytes=64 * MIB))
-        store = QueueStore.open(tmp_path / "state" / name, limits=limits, clock=clock, **kwargs)
-        opened.append(store)
-        return store
-
-    yield make
-    for store in opened:
-        with contextlib.suppress(sqlite3.ProgrammingError):  # closed by the test
-            store.close()
-
-
-def seqs(batch) -> list[int]:
-    return [orjson.loads(e.json)["seq"] for e in batch.events]
 
 
 def test_file_is_private_wal_and_in_a_created_directory(open_store) -> None:
@@ -248,10 +214,11 @@ def test_rows_of_a_retired_dictionary_stay_readable(open_store) -> None:
         cursor.execute(
             "INSERT INTO zstd_dictionaries VALUES (?, ?, 0)", (old.dict_id(), old.as_bytes())
         )
+        (next_id,) = cursor.execute("SELECT value FROM counters WHERE name = 'next_id'").fetchone()
         cursor.execute(
-            "INSERT INTO events(id, event_id, queued_at, codec, dict_id, json_size, body) "
-            "VALUES ((SELECT value FROM counters WHERE name = 'next_id'), 'e7', 0, ?, ?, 40, ?)",
-            (ZSTD_DICT, old.dict_id(), body),
+            "INSERT INTO events(id, last_id, event_id, queued_at, codec, dict_id, json_size, body) "
+            "VALUES (?, ?, 'e7', 0, ?, ?, 40, ?)",
+            (next_id, next_id, ZSTD_DICT, old.dict_id(), body),
         )
         cursor.execute("UPDATE counters SET value = value + 1 WHERE name IN ('depth', 'next_id')")
     store.close()
@@ -335,6 +302,64 @@ def test_damaged_pages_fail_the_check_and_are_moved_aside(tmp_path: Path, open_s
     fresh = open_store()
     assert fresh.stats().depth == 0
     assert len(list(path.parent.glob("queue.db.corrupt-*"))) == 1
+
+
+def damage_pages(path: Path, first: int, last: int) -> None:
+    """Overwrite pages first..last (1-based, 4 KiB) of a closed queue file."""
+    data = bytearray(path.read_bytes())
+    data[(first - 1) * 4096 : last * 4096] = b"\xff" * ((last - first + 1) * 4096)
+    path.write_bytes(bytes(data))
+
+
+def noise_events(count: int) -> list[dict]:
+    """Events that do not compress, so that they fill many pages."""
+    return [event(i) | {"noise": random.Random(i).randbytes(3000).hex()} for i in range(count)]
+
+
+@pytest.fixture
+def huge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """As if the file were too big to check at open: the check stops at once."""
+    monkeypatch.setattr(recovery, "OPEN_CHECK_S", 0.0)
+    monkeypatch.setattr(recovery, "PROGRESS_STEPS", 1)
+
+
+def test_damage_the_open_meets_past_its_check_is_moved_aside_at_once(
+    tmp_path: Path, open_store, huge: None
+) -> None:
+    store = open_store()
+    store.put_many(noise_events(50))
+    store.reclaim_space(force=True)
+    store.close()
+    path = tmp_path / "state" / "queue.db"
+    damage_pages(path, 2, 12)  # the tables the open reads
+    fresh = open_store()
+    assert fresh.stats().depth == 0 and fresh.stats().damaged is None
+    assert len(list(path.parent.glob("queue.db.corrupt-*"))) == 1
+
+
+def test_damage_found_in_use_is_reported_then_moved_aside_at_the_next_open(
+    tmp_path: Path, open_store, huge: None
+) -> None:
+    store = open_store()
+    store.put_many(noise_events(200))
+    store.reclaim_space(force=True)
+    store.close()
+    path = tmp_path / "state" / "queue.db"
+    pages = path.stat().st_size // 4096
+    damage_pages(path, pages - 20, pages - 2)  # events the open does not read
+    damaged = open_store()
+    assert damaged.stats().damaged is None
+    damaged.next_check_at = 0.0  # the whole check is due
+    with contextlib.suppress(QueueError):  # expiry may meet the damage before the check
+        damaged.maintain()
+    assert damaged.stats().damaged
+    assert read_stats(str(path), 0.0).damaged == damaged.stats().damaged
+    damaged.close()
+
+    fresh = open_store()  # the marker asks for the whole check: moved aside
+    assert fresh.stats().depth == 0 and fresh.stats().damaged is None
+    assert len(list(path.parent.glob("queue.db.corrupt-*"))) == 1
+    assert not recovery.damage_marker(path).exists()
 
 
 def test_locked_queue_waits_for_the_lock_then_gives_up(tmp_path: Path, clock: Clock) -> None:
