@@ -110,6 +110,14 @@ class Settings:
         DEFAULT_SAMPLE_RATE_HZ, positive_float(1000), "UDM events built per second"
     )
     batch_size: int = setting(ship.DEFAULT_BATCH_SIZE, int_between(1, 10_000), "events per request")
+    backlog_batch_size: int = setting(
+        ship.DEFAULT_BACKLOG_BATCH_SIZE,
+        int_between(1, 10_000),
+        "events per request while a backlog drains",
+    )
+    requests_in_flight: int = setting(
+        ship.DEFAULT_REQUESTS_IN_FLIGHT, int_between(1, 8), "requests sent at once"
+    )
     bridge_input: str = setting("ros", bridge_input, "where messages come from")
     use_sim_time: bool = setting(False, boolean, "header stamps follow /clock, not the epoch")
     replay_rate: float = setting(

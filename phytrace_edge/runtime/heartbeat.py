@@ -11,7 +11,7 @@ from typing import Any
 
 from phytrace_edge import __version__
 from phytrace_edge.queue.inspect import QueueStats
-from phytrace_edge.ship.sender import SendStats
+from phytrace_edge.ship.stats import SendStats
 
 HEARTBEAT_S = 2.0
 RATE_SMOOTHING = 0.3  # weight of the newest interval in the rate averages

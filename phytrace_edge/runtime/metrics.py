@@ -17,7 +17,7 @@ from prometheus_client.core import (
 from prometheus_client.registry import CollectorRegistry
 
 from phytrace_edge.runtime.heartbeat import Figures
-from phytrace_edge.ship.sender import LATENCY_BUCKETS_S
+from phytrace_edge.ship.stats import LATENCY_BUCKETS_S
 
 log = logging.getLogger(__name__)
 

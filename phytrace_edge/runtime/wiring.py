@@ -111,6 +111,8 @@ def send_policy(s: Settings) -> SendPolicy:
 
     return SendPolicy(
         batch_size=s.batch_size,
+        backlog_batch_size=s.backlog_batch_size,
+        requests_in_flight=s.requests_in_flight,
         batch_max_bytes=s.batch_max_bytes,
         flush_interval_s=s.flush_interval_s,
         retry_min_s=s.retry_min_s,

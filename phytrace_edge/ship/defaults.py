@@ -5,6 +5,8 @@ from phytrace_edge.units import MIB
 
 DEFAULT_ENDPOINT = "http://localhost:8000/api/v1"
 DEFAULT_BATCH_SIZE = 10
+DEFAULT_BACKLOG_BATCH_SIZE = 500  # docs/benchmarks.md: 500 reaches the link's ceiling
+DEFAULT_REQUESTS_IN_FLIGHT = 2  # docs/benchmarks.md: 2 hides a cellular round trip
 DEFAULT_BATCH_MAX_BYTES = 1 * MIB
 DEFAULT_FLUSH_INTERVAL_S = 2.0
 DEFAULT_RETRY_MIN_S = 0.5

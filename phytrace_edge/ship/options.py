@@ -5,10 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from phytrace_edge.ship.defaults import (
+    DEFAULT_BACKLOG_BATCH_SIZE,
     DEFAULT_BATCH_MAX_BYTES,
     DEFAULT_BATCH_SIZE,
     DEFAULT_FLUSH_INTERVAL_S,
     DEFAULT_HTTP_COMPRESSION,
+    DEFAULT_REQUESTS_IN_FLIGHT,
     DEFAULT_RETRY_MAX_S,
     DEFAULT_RETRY_MIN_S,
 )
@@ -16,10 +18,12 @@ from phytrace_edge.ship.defaults import (
 
 @dataclass(frozen=True)
 class SendPolicy:
-    """BATCH_SIZE, BATCH_MAX_BYTES, FLUSH_INTERVAL_S, RETRY_MIN_S/MAX_S,
-    HTTP_COMPRESSION and UPLOAD_MAX_BPS."""
+    """BATCH_SIZE, BACKLOG_BATCH_SIZE, BATCH_MAX_BYTES, REQUESTS_IN_FLIGHT,
+    FLUSH_INTERVAL_S, RETRY_MIN_S/MAX_S, HTTP_COMPRESSION and UPLOAD_MAX_BPS."""
 
     batch_size: int = DEFAULT_BATCH_SIZE
+    backlog_batch_size: int = DEFAULT_BACKLOG_BATCH_SIZE
+    requests_in_flight: int = DEFAULT_REQUESTS_IN_FLIGHT
     batch_max_bytes: int = DEFAULT_BATCH_MAX_BYTES
     flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S
     retry_min_s: float = DEFAULT_RETRY_MIN_S

