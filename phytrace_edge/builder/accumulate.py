@@ -14,6 +14,7 @@ from phytrace_edge.udm.event import format_timestamp
 
 MAX_ITEMS_PER_EVENT = 256
 _SEVERITY = {"unknown": 0, "warn": 1, "stale": 2, "error": 3}
+_ALARM_LEVELS = ("error", "stale")
 
 
 @dataclass
@@ -27,10 +28,13 @@ class DiagnosticsTracker:
 
     active: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
     pending: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
+    alarming: set[tuple[str, str]] = field(default_factory=set)  # at ERROR or STALE now
+    alarm_changed: bool = False  # a status entered or left ERROR/STALE since the last take
 
     def observe(self, statuses: list[dict[str, Any]], at_wall_s: float) -> None:
         for status in statuses:
             key = (status.get("hardware_id", ""), status["name"])
+            self._note_alarm(key, status["level"] in _ALARM_LEVELS)
             if status["level"] == "ok":
                 self.active.pop(key, None)
                 continue
@@ -44,6 +48,19 @@ class DiagnosticsTracker:
             worst = max(seen["level"], status["level"], key=_SEVERITY.__getitem__)
             seen.update(status, level=worst)
             seen["occurrences"] += 1
+
+    def _note_alarm(self, key: tuple[str, str], alarm: bool) -> None:
+        if alarm != (key in self.alarming):
+            self.alarm_changed = True
+            if alarm:
+                self.alarming.add(key)
+            else:
+                self.alarming.discard(key)
+
+    def take_alarm_change(self) -> bool:
+        """Whether a status entered or left ERROR/STALE since the last call."""
+        changed, self.alarm_changed = self.alarm_changed, False
+        return changed
 
     def take(self, include_active: bool) -> list[dict[str, Any]]:
         """Errors for the next event; clears what was seen since the last one.

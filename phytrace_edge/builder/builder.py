@@ -1,8 +1,14 @@
 """UDMBuilder: keeps the latest reading per topic and builds one event per sample tick.
 
 Handler callbacks may arrive on any thread (rclpy multi-threaded executors, the DDS
-listener thread); ``add_reading`` and ``build_event`` are serialised by one lock, and
-the event itself is assembled outside it from an atomic snapshot.
+listener thread); ``add_reading`` and ``build`` are serialised by one lock, and the
+event itself is assembled outside it from an atomic snapshot.
+
+Each event is built with its class (docs/udm.md, "Event classes"): *important* when it
+carries something that must never be thinned from a backlog (a diagnostics status
+entering or leaving ERROR/STALE, a delivery or task transition, a new goal, or the
+first data after the start or after a gap longer than STALE_AFTER_S), else
+*periodic*. The class travels beside the event into the queue, not in the UDM event.
 """
 
 from __future__ import annotations
@@ -10,10 +16,10 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 from phytrace_edge.builder.accumulate import DiagnosticsTracker, GoalTracker, TransitionTracker
-from phytrace_edge.builder.assemble import Latest, Snapshot, assemble_event, is_fresh
+from phytrace_edge.builder.assemble import DOMAINS, Latest, Snapshot, assemble_event, is_fresh
 from phytrace_edge.builder.options import BuilderOptions
 from phytrace_edge.udm.event import new_event_id
 
@@ -36,6 +42,13 @@ class SystemClock:
         return time.time()
 
 
+class Built(NamedTuple):
+    """One tick's event and its class."""
+
+    event: dict[str, Any]
+    important: bool
+
+
 class UDMBuilder:
     """Latest values in, one UDM event per ``build_event`` call out."""
 
@@ -49,6 +62,7 @@ class UDMBuilder:
         self._diagnostics = DiagnosticsTracker()
         self._transitions = TransitionTracker()
         self._goals = GoalTracker()
+        self._last_data_mono: float | None = None  # when the last event with data was built
         self.stale_omissions: Counter[str] = Counter()
 
     def add_reading(self, topic: str, reading: dict[str, Any]) -> None:
@@ -65,6 +79,10 @@ class UDMBuilder:
 
     def build_event(self, captured_at_s: float | None = None) -> dict[str, Any]:
         """The event for this tick; ``captured_at_s`` overrides the wall clock (replay)."""
+        return self.build(captured_at_s).event
+
+    def build(self, captured_at_s: float | None = None) -> Built:
+        """The event for this tick and its class (see the module doc)."""
         now_mono = self._clock.monotonic()
         captured_at = self._clock.wall() if captured_at_s is None else captured_at_s
         with self._lock:
@@ -77,7 +95,9 @@ class UDMBuilder:
                 transitions=self._transitions.take(),
                 new_goals=self._goals.take(),
             )
-        return assemble_event(
+            alarm_changed = self._diagnostics.take_alarm_change()
+            last_data, gap = self._last_data_mono, False
+        event = assemble_event(
             self._identity,
             snapshot,
             event_id=new_event_id(int(captured_at * 1000)),
@@ -86,6 +106,12 @@ class UDMBuilder:
             stale_after_s=self._stale_after_s,
             use_sim_time=self._use_sim_time,
         )
+        if any(domain in event for domain in DOMAINS):
+            gap = last_data is None or now_mono - last_data > self._stale_after_s
+            with self._lock:
+                self._last_data_mono = now_mono
+        important = gap or alarm_changed or bool(snapshot.transitions or snapshot.new_goals)
+        return Built(event, important)
 
     def topic_ages(self) -> dict[str, float]:
         """Seconds since each topic's latest reading arrived."""

@@ -14,13 +14,13 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.builder.assemble import DOMAINS
-from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.builder import Built, UDMBuilder
 
 Event = dict[str, Any]
 
 
 class Sampler:
-    """Builds one event per tick and hands it to ``emit``.
+    """Builds one event per tick and hands it, with its class, to ``emit``.
 
     ``before_tick`` runs first on every tick: an input that reads its state topics at
     the tick (instead of on every message) takes their newest samples there.
@@ -29,7 +29,7 @@ class Sampler:
     def __init__(
         self,
         builder: UDMBuilder,
-        emit: Callable[[Event], None],
+        emit: Callable[[Built], None],
         rate_hz: float,
         before_tick: Callable[[], None] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
@@ -49,11 +49,11 @@ class Sampler:
         if self._before_tick is not None:
             self._before_tick()
         self.ticks += 1
-        event = self.builder.build_event(captured_at_s)
-        if not any(domain in event for domain in DOMAINS):
+        built = self.builder.build(captured_at_s)
+        if not any(domain in built.event for domain in DOMAINS):
             self.empty_ticks += 1
             return False
-        self._emit(event)
+        self._emit(built)
         return True
 
     def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:

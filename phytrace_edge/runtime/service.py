@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from phytrace_edge import __version__
-from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.errors import QueueError
 from phytrace_edge.ingest.dispatch import Dispatcher
@@ -95,12 +95,12 @@ class BridgeService:
         """Call ``callback`` once the service has stopped (its queue closed)."""
         self._on_stopped.append(callback)
 
-    def _emit(self, event: dict[str, Any]) -> None:
+    def _emit(self, built: Built) -> None:
         self.events_built += 1
-        check_event(event, log)  # a violation is logged; the event is still kept
+        check_event(built.event, log)  # a violation is logged; the event is still kept
         if self._on_event is not None:
-            self._on_event(event)
-        self.writer.put(event, wait=self.source.keeps_time)  # a bag waits for the disk
+            self._on_event(built.event)
+        self.writer.put(built, wait=self.source.keeps_time)  # a bag waits for the disk
 
     def summary(self) -> str:
         o = self.options

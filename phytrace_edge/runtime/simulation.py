@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
 from phytrace_edge.ingest.dispatch import Dispatcher
@@ -51,7 +51,8 @@ def run_simulation(
     sink = sink or collected.append
     counts = {"sent": 0, "failed": 0}
 
-    def emit(event: Event) -> None:
+    def emit(built: Built) -> None:
+        event = built.event
         if not check_event(event, log):
             counts["failed"] += 1
             return

@@ -15,8 +15,8 @@ import logging
 import threading
 from collections import deque
 from collections.abc import Callable
-from typing import Any
 
+from phytrace_edge.builder.builder import Built
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.store import QueueStore
 
@@ -34,14 +34,14 @@ class QueueWriter:
     def __init__(self, store: QueueStore) -> None:
         self.store = store
         self.stop = threading.Event()
-        self._pending: deque[dict[str, Any]] = deque()
+        self._pending: deque[Built] = deque()
         self._lock = threading.Lock()
         self._room = threading.Condition(self._lock)
         self._wake = threading.Event()
         self._retry_pause = threading.Event()  # never set: a plain interruptible pause
         self.events_dropped = 0
 
-    def put(self, event: dict[str, Any], wait: bool = False) -> None:
+    def put(self, built: Built, wait: bool = False) -> None:
         """Hand an event over; never blocks on disk unless asked to ``wait`` for room
         (it then returns early only when the writer is stopping)."""
         with self._lock:
@@ -57,7 +57,7 @@ class QueueWriter:
                         self.events_dropped,
                     )
                 return
-            self._pending.append(event)
+            self._pending.append(built)
         self._wake.set()
 
     def request_stop(self) -> None:
@@ -86,7 +86,8 @@ class QueueWriter:
         if not group:
             return False
         try:
-            self.store.put_many(group)  # drops by the caps are counted by the store
+            # drops by the caps are counted by the store
+            self.store.put_many([b.event for b in group], [b.important for b in group])
         except QueueError as exc:  # busy past the timeout: keep them and try again
             log.warning("queue put failed (%s); retrying in %.1f s", exc, RETRY_S)
             self._retry_pause.wait(RETRY_S)

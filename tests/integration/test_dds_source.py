@@ -110,7 +110,9 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
         source = DdsSource(wiring.source_options(settings, os.environ))
         builder = UDMBuilder(wiring.builder_options(settings))
         dispatcher = Dispatcher(builder.add_reading)
-        sampler = Sampler(builder, events.append, 10, before_tick=source.before_tick)
+        sampler = Sampler(
+            builder, lambda built: events.append(built.event), 10, before_tick=source.before_tick
+        )
         source.start(Feed(dispatcher.on_message, sampler.tick, sampler.period_s))
         threading.Thread(target=sampler.run, args=(stop,), daemon=True).start()
         wanted = set(DOMAINS)

@@ -48,7 +48,9 @@ class Graph:
             self.dispatcher.on_message,
             dict(options.qos_overrides),
         )
-        sampler = Sampler(builder, self.events.append, settings.sample_rate_hz)
+        sampler = Sampler(
+            builder, lambda built: self.events.append(built.event), settings.sample_rate_hz
+        )
         node.create_timer(sampler.period_s, sampler.tick, clock=self.api.clock("steady"))
         self.executor = mock_ros.SingleThreadedExecutor(self.context, [self.robot, node])
 

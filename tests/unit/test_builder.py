@@ -214,3 +214,31 @@ def test_concurrent_callbacks_and_ticks(clock: FakeClock) -> None:
     errors_seen.extend(builder.build_event()["operational"]["errors"])
     # every error occurrence is counted exactly once across all events
     assert sum(e.get("occurrences", 0) for e in errors_seen) == 4 * per_thread // 2
+
+
+def test_event_classes_mark_what_must_never_be_thinned(
+    builder: UDMBuilder, clock: FakeClock
+) -> None:
+    def tick(**readings: dict) -> bool:
+        for name, reading in readings.items():
+            topic = {"delivery_status": "/delivery/status"}.get(name, f"/{name}")
+            builder.add_reading(topic, reading)
+        clock.advance(0.2)
+        builder.add_reading("/odom", ODOM)
+        return builder.build().important
+
+    assert builder.build().important is False, "no data yet: nothing to mark"
+    assert tick() is True, "the first event with data"
+    assert tick() is False, "then periodic"
+    assert tick(diagnostics=statuses(("motor", "error"))) is True, "an alarm is raised"
+    assert tick(diagnostics=statuses(("motor", "error"))) is False, "and stays: periodic"
+    assert tick(diagnostics=statuses(("motor", "warn"))) is True, "the alarm clears"
+    assert tick(diagnostics=statuses(("motor", "warn"))) is False
+    assert tick(diagnostics=statuses(("lidar", "stale"))) is True, "STALE is an alarm too"
+    assert tick(delivery_status=delivery("loading")) is True, "a transition"
+    assert tick(delivery_status=delivery("loading")) is False
+    goal = {"goal": {"frame_id": "map", "x_m": 1.0, "y_m": 2.0, "yaw_deg": 0.0}}
+    assert tick(goal_pose=goal) is True, "a new goal"
+    clock.advance(6.0)  # nothing heard for longer than STALE_AFTER_S
+    assert tick() is True, "the first data after a gap"
+    assert tick() is False
