@@ -1,8 +1,10 @@
 """The byte and event caps, and what a full queue drops (QUEUE_ON_FULL).
 
-``Caps.make_room`` runs in the put's transaction: it drops the oldest unleased events
-(``drop_oldest``) or the newest incoming ones (``drop_newest``) until the put fits, and
-counts them by reason (``cap_bytes``, ``cap_events``). Asking SQLite how full the file
+``Caps.make_room`` runs in the put's transaction: until the put fits, it thins the
+oldest periodic history (``thin``, see ``thinning``; then drops the oldest periodic
+events, and important ones last), drops the oldest unleased events (``drop_oldest``)
+or the newest incoming ones (``drop_newest``), and counts them by reason
+(``thinned``, ``cap_bytes``, ``cap_events``). Asking SQLite how full the file
 is costs a query, so most puts are admitted by an estimate that is certain to be safe.
 """
 
@@ -14,9 +16,11 @@ from dataclasses import dataclass
 from typing import TypeVar
 
 from phytrace_edge.queue import leases
+from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import bump_counters
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.rows import delete_range, depth_and_used_bytes
+from phytrace_edge.queue.thinning import thin_oldest
 from phytrace_edge.units import MIB
 
 ROW_OVERHEAD_BYTES = 96  # event_id, numbers, record and cell headers of one row
@@ -73,8 +77,11 @@ def wal_reserve(max_bytes: int) -> int:
 class Caps:
     """Applies QueueLimits to puts, inside the put's transaction."""
 
-    def __init__(self, limits: QueueLimits, page_size: int) -> None:
+    def __init__(
+        self, limits: QueueLimits, page_size: int, codecs: Codecs, frame_events: int
+    ) -> None:
         self.limits = limits
+        self.codecs, self.frame_events = codecs, frame_events
         self.data_cap = limits.max_bytes - 2 * wal_reserve(limits.max_bytes)
         self.page_size = page_size
         self.room = RoomEstimate(self.data_cap, limits.max_events)
@@ -105,8 +112,8 @@ class Caps:
 
         if limits.max_events is not None and depth + len(rows) > limits.max_events:
             excess = depth + len(rows) - limits.max_events
-            if limits.on_full == "drop_oldest":
-                excess -= drop_oldest(cursor, excess, "cap_events", now)
+            if limits.on_full != "drop_newest":
+                excess -= self._free(cursor, excess, "cap_events", now)
             if excess > 0:
                 bump_counters(cursor, **{"drop:cap_events": min(excess, len(rows))})
                 rows = rows[: max(0, len(rows) - excess)]
@@ -116,9 +123,9 @@ class Caps:
             return used + per_event * len(rows) - self.data_cap
 
         excess_bytes = over()
-        if limits.on_full == "drop_oldest":
+        if limits.on_full != "drop_newest":
             for _ in range(MAX_DROP_ROUNDS):  # deleted rows free whole pages only
-                if excess_bytes <= 0 or not drop_oldest(
+                if excess_bytes <= 0 or not self._free(
                     cursor, math.ceil(excess_bytes / per_event) + 1, "cap_bytes", now
                 ):
                     break
@@ -128,6 +135,13 @@ class Caps:
             bump_counters(cursor, **{"drop:cap_bytes": len(rows) - keep})
             rows = rows[:keep]
         return rows
+
+    def _free(self, cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> int:
+        """Make room for about ``count`` events: thin, or drop the oldest."""
+        if self.limits.on_full != "thin":
+            return drop_oldest(cursor, count, reason, now)
+        thinned = thin_oldest(cursor, self.codecs, count, now, max(2, self.frame_events))
+        return thinned or drop_oldest(cursor, count, reason, now, periodic_first=True)
 
     def fitting(self, cursor: sqlite3.Cursor, sizes: list[int]) -> int:
         """How many of these rows (oldest first) fit under the caps without dropping
@@ -152,10 +166,16 @@ class Caps:
         return math.ceil(estimate)
 
 
-def drop_oldest(cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> int:
+def drop_oldest(
+    cursor: sqlite3.Cursor, count: int, reason: str, now: float, periodic_first: bool = False
+) -> int:
     """Delete at least ``count`` oldest events not under a lease (whole rows: a frame
-    goes at once), as many as there are; counted as ``reason``."""
-    dropped = 0
+    goes at once), as many as there are; counted as ``reason``. ``periodic_first``:
+    important events go only when no periodic ones are left to drop."""
+    dropped = _drop_oldest_periodic(cursor, count, now) if periodic_first else 0
+    if dropped:
+        bump_counters(cursor, **{f"drop:{reason}": dropped})
+        return dropped
     for low, high in leases.free_ranges(cursor, now):
         if dropped >= count:
             break
@@ -171,4 +191,22 @@ def drop_oldest(cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> 
         if last is not None:
             dropped += delete_range(cursor, low, last)
     bump_counters(cursor, **{f"drop:{reason}": dropped})
+    return dropped
+
+
+def _drop_oldest_periodic(cursor: sqlite3.Cursor, count: int, now: float) -> int:
+    """Delete at least ``count`` of the oldest periodic events not under a lease."""
+    dropped = 0
+    for low, high in leases.free_ranges(cursor, now):
+        rows = cursor.execute(
+            "SELECT id, last_id, count FROM events WHERE id BETWEEN ? AND ? AND important = 0 "
+            "ORDER BY id LIMIT ?",
+            (low, high, count - dropped),
+        ).fetchall()
+        for row_id, last_id, _ in rows:
+            if dropped >= count:
+                return dropped
+            dropped += delete_range(cursor, row_id, last_id)
+        if dropped >= count:
+            break
     return dropped

@@ -1,6 +1,7 @@
-"""Claims, the SQL of the sending side: lease the oldest free events, delete what
-PhyCloud accepted (moving its rejects to dead letters), and take back the claims of
-processes that died. Each runs in the caller's transaction."""
+"""Claims, the SQL of the sending side: lease events for one of the two lanes (the
+backfill, oldest first; the live lane, newest first), delete what PhyCloud accepted
+(moving its rejects to dead letters), and take back the claims of processes that
+died. Each runs in the caller's transaction."""
 
 from __future__ import annotations
 
@@ -9,52 +10,137 @@ from collections.abc import Sequence
 from typing import Any
 
 from phytrace_edge.queue import leases
+from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import bump_counters
+from phytrace_edge.queue.frames import decode_rows
 from phytrace_edge.queue.records import Batch, DeadLetterRow
 from phytrace_edge.queue.rows import delete_range
 
+BAND_S = 3600.0  # the backfill's age band: its important events go before its periodic ones
+
+Range = tuple[int, int]
+
 
 def lease_oldest(
-    cursor: sqlite3.Cursor, max_events: int, max_bytes: int, token: str, now: float, until: float
-) -> list[Any]:
-    """Rows (id, last_id, count, queued_at, event_id, codec, dict_id, body) of the oldest
-    free
-    events: whole rows of at most ``max_events`` events and ``max_bytes`` of JSON
-    (always one row), now leased to ``token`` until ``until``."""
+    cursor: sqlite3.Cursor,
+    limits: tuple[int, int],
+    token: str,
+    now: float,
+    until: float,
+    important_first: bool = True,
+) -> tuple[list[Range], list[Any]]:
+    """The backfill lane: lease the oldest free events, whole rows of at most
+    ``limits`` = (events, bytes of JSON) (always one row), to ``token`` until
+    ``until``; (the ranges leased, their rows (id, last_id, count, queued_at,
+    event_id, codec, dict_id, body) oldest first). With ``important_first``, the
+    important events of the oldest hour still queued go first, a lease each."""
+    free = leases.free_ranges(cursor, now)
     sizes: list[Any] = []
-    for low, high in leases.free_ranges(cursor, now):
+    for low, high in free:
         sizes = cursor.execute(
-            "SELECT id, last_id, count, json_size FROM events WHERE id BETWEEN ? AND ? "
-            "ORDER BY id LIMIT ?",
-            (low, high, max_events),
+            "SELECT id, last_id, count, json_size, queued_at FROM events "
+            "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+            (low, high, limits[0]),
         ).fetchall()
         if sizes:
             break
-    events, total, keep = 0, 0, 0
-    for _, _, count, json_size in sizes:
-        if keep and (events + count > max_events or total + json_size > max_bytes):
+    if not sizes:
+        return [], []
+    if important_first:
+        ahead = _important_in_band(cursor, now, sizes[0][4] + BAND_S, limits)
+        if ahead:
+            return _lease(cursor, [(row[0], row[1]) for row in ahead], token, until)
+    kept = _within(sizes, limits)
+    return _lease(cursor, [(sizes[0][0], sizes[kept - 1][1])], token, until)
+
+
+def lease_newest(
+    cursor: sqlite3.Cursor,
+    limits: tuple[int, int],
+    token: str,
+    now: float,
+    until: float,
+    since: float,
+) -> tuple[list[Range], list[Any]]:
+    """The live lane: lease the newest free events queued at or after ``since``, whole
+    rows of at most ``limits`` (always one row); as ``lease_oldest``. The rows are
+    one run below the newest, so the lane sends newest first, batch by batch."""
+    for low, high in reversed(leases.free_ranges(cursor, now)):
+        newest = cursor.execute(
+            "SELECT id, last_id, count, json_size, queued_at FROM events "
+            "WHERE id BETWEEN ? AND ? ORDER BY id DESC LIMIT ?",
+            (low, high, limits[0]),
+        ).fetchall()
+        fresh = _takewhile_since(newest, since)
+        if fresh:
+            kept = _within(fresh, limits)
+            return _lease(cursor, [(fresh[kept - 1][0], fresh[0][1])], token, until)
+        if newest:
+            break  # this range's newest is older than ``since``: so is all below it
+    return [], []
+
+
+def _takewhile_since(rows: list[Any], since: float) -> list[Any]:
+    taken = []
+    for row in rows:
+        if row[4] < since:
             break
-        events += count
-        total += json_size
-        keep += 1
-    if not keep:
-        return []
-    first_id, last_id = sizes[0][0], sizes[keep - 1][1]
-    leases.take(cursor, first_id, last_id, token, until)
-    return cursor.execute(
-        "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body FROM events "
-        "WHERE id BETWEEN ? AND ? ORDER BY id",
-        (first_id, last_id),
+        taken.append(row)
+    return taken
+
+
+def _within(sizes: list[Any], limits: tuple[int, int]) -> int:
+    """How many of these rows (id, last_id, count, json_size, ...) fit in ``limits``;
+    at least one."""
+    events, total, kept = 0, 0, 0
+    for row in sizes:
+        count, json_size = row[2], row[3]
+        if kept and (events + count > limits[0] or total + json_size > limits[1]):
+            break
+        events, total, kept = events + count, total + json_size, kept + 1
+    return kept
+
+
+def _important_in_band(
+    cursor: sqlite3.Cursor, now: float, before: float, limits: tuple[int, int]
+) -> list[Any]:
+    """Unleased important rows queued before ``before``, oldest first, within
+    ``limits`` (found by the partial index on important rows, not a scan)."""
+    rows = cursor.execute(
+        "SELECT id, last_id, count, json_size, queued_at FROM events AS e "
+        "WHERE important = 1 AND queued_at < ? AND NOT EXISTS (SELECT 1 FROM leases "
+        "WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) ORDER BY id LIMIT ?",
+        (before, now, limits[0]),
     ).fetchall()
+    return rows[: _within(rows, limits)] if rows else []
+
+
+def _lease(
+    cursor: sqlite3.Cursor, ranges: list[Range], token: str, until: float
+) -> tuple[list[Range], list[Any]]:
+    rows: list[Any] = []
+    for first_id, last_id in ranges:
+        leases.take(cursor, first_id, last_id, token, until)
+        rows += cursor.execute(
+            "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body FROM events "
+            "WHERE id BETWEEN ? AND ? ORDER BY id",
+            (first_id, last_id),
+        ).fetchall()
+    return ranges, rows
 
 
 def delete_accepted(
-    cursor: sqlite3.Cursor, batch: Batch, dead_letters: Sequence[DeadLetterRow], now: float
+    cursor: sqlite3.Cursor,
+    batch: Batch,
+    dead_letters: Sequence[DeadLetterRow],
+    now: float,
+    codecs: Codecs,
 ) -> None:
     """Delete a batch PhyCloud has, keeping ``dead_letters`` aside first."""
     rejected = 0  # those this ack deletes: after a lease ran out, another may have them
+    deleting = _ids_deleted_by(cursor, batch, codecs) if dead_letters else set()
     for dead in dead_letters:
-        if not deleted_by(cursor, dead.queue_id, batch):
+        if dead.event_id not in deleting:
             continue
         cursor.execute(
             "INSERT INTO dead_letters(event_id, queued_at, dead_at, reason, status_code, "
@@ -73,8 +159,8 @@ def delete_accepted(
             ),
         )
         rejected += 1
-    deleted = delete_range(cursor, batch.first_id, batch.last_id)
-    leases.give_back(cursor, batch.first_id, batch.owner)
+    deleted = sum(delete_range(cursor, first, last) for first, last in batch.ranges)
+    leases.give_back(cursor, batch.owner)
     bump_counters(
         cursor,
         acked_total=max(0, deleted - rejected),
@@ -83,17 +169,19 @@ def delete_accepted(
     )
 
 
-def deleted_by(cursor: sqlite3.Cursor, queue_id: int, batch: Batch) -> bool:
-    """Whether the event ``queue_id`` is still queued, in a row the ack of ``batch``
-    deletes (one wholly within the batch's ids)."""
-    row = cursor.execute(
-        "SELECT id, last_id FROM events WHERE id <= ? ORDER BY id DESC LIMIT 1", (queue_id,)
-    ).fetchone()
-    return (
-        row is not None
-        and queue_id <= row[1]
-        and batch.first_id <= row[0] <= row[1] <= batch.last_id
-    )
+def _ids_deleted_by(cursor: sqlite3.Cursor, batch: Batch, codecs: Codecs) -> set[str]:
+    """The event_ids still queued in rows the ack of ``batch`` deletes (those wholly
+    within its ranges). Read by event_id, not queue id: thinning may have repacked a
+    frame since the claim, and then its events' queue ids moved."""
+    ids: set[str] = set()
+    for first, last in batch.ranges:
+        rows = cursor.execute(
+            "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body FROM events "
+            "WHERE id BETWEEN ? AND ? AND last_id <= ?",
+            (first, last, last),
+        ).fetchall()
+        ids.update(event.event_id for event in decode_rows(codecs, rows))
+    return ids
 
 
 def take_back(cursor: sqlite3.Cursor, dead_owners: list[str]) -> None:

@@ -91,7 +91,8 @@ class DeadLetterBox:
         now = self._clock()
         with self._db.transaction() as cursor:
             rows = cursor.execute(
-                f"SELECT id, event_id, ?, codec, dict_id, json_size, body FROM dead_letters "
+                # requeued by hand: important, never thinned
+                f"SELECT id, event_id, 1, ?, codec, dict_id, json_size, body FROM dead_letters "
                 f"{where} ORDER BY id",
                 (now, *params),
             ).fetchall()

@@ -85,7 +85,10 @@ class Sealer:
 
     def seal(self, cursor: sqlite3.Cursor, now: float) -> int:
         """Seal up to ``SEAL_MAX_FRAMES`` frames of rows queued before
-        ``now - SEAL_AFTER_S`` that no lease covers; the number of frames made."""
+        ``now - SEAL_AFTER_S`` that no lease covers; the number of frames made. Frames
+        of one event are no frames: ``frame_events=1`` turns sealing off."""
+        if self.frame_events < 2:
+            return 0
         cutoff, made = now - SEAL_AFTER_S, 0
         for low, high in leases.free_ranges(cursor, now):
             for run in self._runs(cursor, max(low, self.sealed_below), high, cutoff):
@@ -102,14 +105,14 @@ class Sealer:
         run: list[int] = []
         while True:
             rows = cursor.execute(
-                "SELECT id, last_id, count, queued_at FROM events WHERE id BETWEEN ? AND ? "
-                "ORDER BY id LIMIT ?",
+                "SELECT id, last_id, count, important, queued_at FROM events "
+                "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
                 (low, high, _SCAN_ROWS),
             ).fetchall()
-            for row_id, last_id, count, queued_at in rows:
+            for row_id, last_id, count, important, queued_at in rows:
                 if queued_at >= cutoff:
                     return  # ids grow with time: the rest is fresh
-                if count > 1:
+                if count > 1 or important:  # a frame, or an event that stays alone
                     run = []
                     self.sealed_below = last_id + 1
                     continue

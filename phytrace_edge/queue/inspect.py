@@ -52,6 +52,7 @@ class QueueStats:
         "oldest_queued_at",
         "path",
         "quarantined",
+        "resolution",
         "service",
     )
 
@@ -68,12 +69,18 @@ class QueueStats:
         max_bytes: int = 0,
         extra_drops: dict[str, int] | None = None,
         damaged: str | None = None,
+        resolution: list[dict[str, Any]] | None = None,
     ) -> None:
         self.path, self.counters, self.file_bytes = path, counters, file_bytes
         self.oldest_queued_at, self.newest_queued_at = oldest_queued_at, newest_queued_at
         self.quarantined, self.leased, self.service = quarantined, leased, service
         self.max_bytes, self.extra_drops = max_bytes, extra_drops or {}
         self.damaged = damaged
+        self.resolution = resolution or []
+
+    def add_deferred(self, deferred: dict[str, int]) -> None:
+        """Add the drops counted in memory and not yet written (the disk was full)."""
+        self.extra_drops = {name[5:]: n for name, n in deferred.items() if name.startswith("drop:")}
 
     @property
     def depth(self) -> int:
@@ -151,7 +158,28 @@ def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueSt
         leased=int(leased),
         service=service,
         damaged=_damage_found(path),
+        # only a thinned queue has bands to show; the others need no scan
+        resolution=_resolution(connection, now) if counters.get("drop:thinned") else [],
     )
+
+
+def _resolution(connection: sqlite3.Connection, now: float) -> list[dict[str, Any]]:
+    """The periodic history's resolution by age, oldest first: for each thinning level
+    present, the ages it spans and the events it holds (``thinning``). Reads every row's
+    small columns, not the bodies: a frame of 100 events is one row."""
+    bands = connection.execute(
+        "SELECT thin_level, min(queued_at), max(coalesce(newest_at, queued_at)), sum(count) "
+        "FROM events WHERE important = 0 GROUP BY thin_level ORDER BY thin_level DESC"
+    ).fetchall()
+    return [
+        {
+            "keeps": f"1 in {2**level}" if level else "all",
+            "oldest_age_s": round(max(0.0, now - oldest), 1),
+            "newest_age_s": round(max(0.0, now - newest), 1),
+            "events": int(events),
+        }
+        for level, oldest, newest, events in bands
+    ]
 
 
 def _damage_found(path: str) -> str | None:

@@ -28,17 +28,18 @@ def take(cursor: sqlite3.Cursor, first_id: int, last_id: int, owner: str, until:
     )
 
 
-def give_back(cursor: sqlite3.Cursor, first_id: int, owner: str) -> None:
-    cursor.execute("DELETE FROM leases WHERE first_id = ? AND owner = ?", (first_id, owner))
+def give_back(cursor: sqlite3.Cursor, owner: str) -> None:
+    """End a claim (every claim has its own token: this frees no other)."""
+    cursor.execute("DELETE FROM leases WHERE owner = ?", (owner,))
 
 
-def extend(cursor: sqlite3.Cursor, first_id: int, owner: str, now: float, until: float) -> bool:
-    """Extend a lease that has not expired; False if it had (or is gone)."""
+def extend(cursor: sqlite3.Cursor, owner: str, now: float, until: float) -> bool:
+    """Extend a claim's leases that have not expired; False if they had (or are gone)."""
     cursor.execute(
-        "UPDATE leases SET expires_at = ? WHERE first_id = ? AND owner = ? AND expires_at > ?",
-        (until, first_id, owner, now),
+        "UPDATE leases SET expires_at = ? WHERE owner = ? AND expires_at > ?",
+        (until, owner, now),
     )
-    return cursor.rowcount == 1
+    return cursor.rowcount > 0
 
 
 def take_back(cursor: sqlite3.Cursor, owner_token: str) -> int:

@@ -95,6 +95,13 @@ def is_alive(queue_path: Path, token: str) -> bool:
         os.close(fd)
 
 
+def dead_owners(queue_path: Path, claim_owners: set[str], own_token: str) -> list[str]:
+    """The owner tokens among these claims' (``<owner token>:<claim>``) whose process
+    is gone, this process's own excepted."""
+    tokens = {owner.split(":", 1)[0] for owner in claim_owners} - {own_token}
+    return [token for token in tokens if not is_alive(queue_path, token)]
+
+
 def sweep_dead_owners(queue_path: Path) -> None:
     """Remove the files of owners that died without leases (they would pile up)."""
     folder = Path(f"{queue_path}.owners")

@@ -18,12 +18,21 @@ class QueuedEvent:
 
 @dataclass(frozen=True)
 class Batch:
-    """Events claimed under one lease: queue ids ``first_id..last_id``, oldest first."""
+    """Events claimed under one claim token (``owner``): the rows within the id
+    ``ranges`` it leased (one, or one per important event taken ahead of its turn),
+    oldest first."""
 
-    first_id: int
-    last_id: int
+    ranges: tuple[tuple[int, int], ...]
     owner: str
     events: list[QueuedEvent]
+
+    @property
+    def first_id(self) -> int:
+        return self.ranges[0][0]
+
+    @property
+    def last_id(self) -> int:
+        return self.ranges[-1][1]
 
     @property
     def json_bytes(self) -> int:

@@ -13,19 +13,19 @@ MAX_ID = 2**63 - 1
 
 
 def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **counters: int) -> None:
-    """Insert (event_id, queued_at, codec, dict_id, json_size, body) rows with ids from
-    next_id, keeping depth and stored_bytes exact, and add ``counters``."""
+    """Insert (event_id, important, queued_at, codec, dict_id, json_size, body) rows with
+    ids from next_id, keeping depth and stored_bytes exact, and add ``counters``."""
     next_id = cursor.execute("SELECT value FROM counters WHERE name = 'next_id'").fetchone()[0]
     cursor.executemany(
-        "INSERT INTO events(id, last_id, event_id, queued_at, codec, dict_id, json_size, body) "
-        "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        "INSERT INTO events(id, last_id, event_id, important, queued_at, codec, dict_id, "
+        "json_size, body) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
         [(next_id + offset, next_id + offset, *row) for offset, row in enumerate(rows)],
     )
     bump_counters(
         cursor,
         next_id=len(rows),
         depth=len(rows),
-        stored_bytes=sum(len(r[5]) for r in rows),
+        stored_bytes=sum(len(r[6]) for r in rows),
         **counters,
     )
 

@@ -1,27 +1,28 @@
 """QueueStore: the durable hand-off between build and ship, one SQLite file in WAL mode.
 
-Build appends (``put``/``put_many``); ship takes the oldest events under a lease
-(``claim_batch``), sends them, and deletes them only after PhyCloud accepted them
-(``ack``), or gives them back (``release``).
+Build appends (``put``/``put_many``, each event with its class); ship takes events
+under a lease, the oldest (``claim_batch``) or the newest (``claim_live``), sends them,
+and deletes them only after PhyCloud accepted them (``ack``), or gives them back
+(``release``).
 
 Durability: ``put`` returns after its transaction committed; with QUEUE_SYNC=full
 (the default) that includes an fsync of the WAL, so an acknowledged event survives a
 kill -9 and a power loss. Grouped puts share one fsync (group commit). Claims, acks
 and lease renewals commit without an fsync of their own: losing one to a power cut
 only makes the bridge send a batch again, which PhyCloud deduplicates, and the next
-put's fsync makes them durable anyway (docs/queue.md, "Durability").
-
-Events that wait (an outage) are packed into frames by the writer (``frames``).
+put's fsync makes them durable anyway (docs/queue.md, "What survives what"). Events
+that wait (an outage) are packed into frames by the writer (``frames``).
 
 Every event that leaves the queue other than by ``ack`` is counted by reason:
-``cap_bytes``, ``cap_events`` (caps), ``ttl`` (expired), ``disk_full`` (SQLITE_FULL),
-``rejected`` (dead-lettered). Thread-safe: every use of the connection holds the
+``thinned``, ``cap_bytes``, ``cap_events`` (caps), ``ttl`` (expired), ``disk_full``
+(SQLITE_FULL), ``rejected`` (dead-lettered). Thread-safe: every use of the connection holds the
 database's lock, and each thread has its own compressors.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import logging
 import sqlite3
@@ -50,7 +51,7 @@ from phytrace_edge.queue.full_disk import FullDisk
 from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.migrate import migrate
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.ownership import Owner, is_alive, sweep_dead_owners
+from phytrace_edge.queue.ownership import Owner, dead_owners, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
 from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
 from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
@@ -86,7 +87,7 @@ class QueueStore:
         self.busy_timeout_s = DEFAULT_BUSY_TIMEOUT_S
         self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S  # monotonic
         self.codecs = Codecs(compression)
-        self._caps = Caps(limits, db.page_size)
+        self._caps = Caps(limits, db.page_size, self.codecs, frame_events)
         self._wal_reserve = wal_reserve(limits.max_bytes)
         self._full_disk = FullDisk(db, self._wal_reserve)
         db.execute(f"PRAGMA journal_size_limit = {self._wal_reserve}")
@@ -148,11 +149,8 @@ class QueueStore:
             connection.close()
             raise
         if quarantined is not None:
-            with store._db.transaction() as cursor:
-                cursor.execute(
-                    "INSERT OR REPLACE INTO meta(key, value) VALUES ('quarantined', ?)",
-                    (str(quarantined),),
-                )
+            sql = "INSERT OR REPLACE INTO meta(key, value) VALUES ('quarantined', ?)"
+            store._db.write(lambda cursor: cursor.execute(sql, (str(quarantined),)))
         store.busy_timeout_s = busy_timeout_s
         store.next_check_at = time.monotonic() + (INTEGRITY_EVERY_S if checked_whole else 0.0)
         store.take_back_orphaned_leases()
@@ -177,20 +175,24 @@ class QueueStore:
 
     # ------------------------------------------------------------------ put
 
-    def put(self, event: dict[str, Any]) -> PutResult:
+    def put(self, event: dict[str, Any], important: bool = False) -> PutResult:
         """Queue one event; returns once it is durable (see module doc)."""
-        return self.put_many([event])
+        return self.put_many([event], [important])
 
-    def put_many(self, events: Sequence[dict[str, Any]]) -> PutResult:
-        """Queue events in one transaction (group commit). Never raises for a full
-        queue or a full disk: what cannot be kept is counted as a drop and logged."""
-        rows = [self._encode(event) for event in events]
+    def put_many(
+        self, events: Sequence[dict[str, Any]], important: Sequence[bool] | None = None
+    ) -> PutResult:
+        """Queue events in one transaction (group commit); ``important`` gives each
+        event's class (default: all periodic). Never raises for a full queue or a full
+        disk: what cannot be kept is counted as a drop and logged."""
+        classes = important if important is not None else [False] * len(events)
+        rows = [self._encode(event, cls) for event, cls in zip(events, classes, strict=True)]
         if not rows:
             return PutResult(0, 0)
         try:
             return self._insert(rows)
         except QueueFullError:
-            if self.limits.on_full == "drop_oldest" and self._evict_oldest(
+            if self.limits.on_full != "drop_newest" and self._evict_oldest(
                 max(len(rows), self._db.counter("depth") // 100), "disk_full"
             ):
                 with contextlib.suppress(QueueFullError):
@@ -199,20 +201,23 @@ class QueueStore:
             self._full_disk.report_refused(self.path, len(rows))
             return PutResult(0, len(rows))
 
-    def _encode(self, event: dict[str, Any]) -> tuple[str, int, Encoded]:
+    def _encode(self, event: dict[str, Any], important: bool) -> tuple[str, bool, int, Encoded]:
         raw = orjson.dumps(event)
-        return str(event.get("event_id", "")), len(raw), self.codecs.encode(raw)
+        return str(event.get("event_id", "")), important, len(raw), self.codecs.encode(raw)
 
-    def _insert(self, rows: list[tuple[str, int, Encoded]]) -> PutResult:
+    def _insert(self, rows: list[tuple[str, bool, int, Encoded]]) -> PutResult:
         now = self._clock()
-        sizes = [len(encoded.body) for _, _, encoded in rows]
+        sizes = [len(encoded.body) for *_, encoded in rows]
         if self._full_disk.refuses(sizes):
             raise QueueFullError(f"queue {self.path}: disk full")
         with self._db.transaction() as cursor:
             accepted = self._caps.make_room(cursor, rows, sizes, now)
             insert_rows(
                 cursor,
-                [(eid, now, e.codec, e.dict_id, size, e.body) for eid, size, e in accepted],
+                [
+                    (eid, int(important), now, e.codec, e.dict_id, size, e.body)
+                    for eid, important, size, e in accepted
+                ],
                 queued_total=len(rows),  # every event put, whatever the caps did with it
             )
         self._seal(now)
@@ -256,32 +261,41 @@ class QueueStore:
 
     # ------------------------------------------------------------------ claim / ack
 
-    def claim_batch(self, max_events: int, max_bytes: int) -> Batch | None:
-        """Lease the oldest unleased events: at most ``max_events`` and ``max_bytes`` of
-        JSON (but always one, however large). None when there is nothing to send."""
+    def claim_batch(
+        self, max_events: int, max_bytes: int, important_first: bool = True
+    ) -> Batch | None:
+        """The backfill lane: lease the oldest unleased events, at most ``max_events``
+        and ``max_bytes`` of JSON (but always one, however large); with
+        ``important_first`` the important events of the oldest hour go first
+        (``claims.lease_oldest``). None when there is nothing to send."""
         if self._db.counter("depth") == 0:
             return None
-        batch = self._claim(max_events, max_bytes)
+        lease = functools.partial(claims.lease_oldest, important_first=important_first)
+        batch = self._claim(lease, (max_events, max_bytes))
         if batch is None and self.take_back_orphaned_leases():
             # everything left was claimed, and some of it by a process that died
-            batch = self._claim(max_events, max_bytes)
+            batch = self._claim(lease, (max_events, max_bytes))
         return batch
 
-    def _claim(self, max_events: int, max_bytes: int) -> Batch | None:
+    def claim_live(self, max_events: int, max_bytes: int, since: float) -> Batch | None:
+        """The live lane: lease the newest unleased events queued at or after
+        ``since`` (store clock), newest batch first. None when there are none."""
+        if self._db.counter("depth") == 0:
+            return None
+        lease = functools.partial(claims.lease_newest, since=since)
+        return self._claim(lease, (max_events, max_bytes))
+
+    def _claim(self, lease: Callable[..., Any], limits: tuple[int, int]) -> Batch | None:
         now = self._clock()
         # each claim its own token: releasing a stale claim never frees a newer one
         token = f"{self._owner.token}:{next(self._claims)}"
-
-        rows = self._db.write(
-            lambda cursor: claims.lease_oldest(
-                cursor, max_events, max_bytes, token, now, now + self.lease_s
-            ),
-            durable=False,
+        ranges, rows = self._db.write(
+            lambda cursor: lease(cursor, limits, token, now, now + self.lease_s), durable=False
         )
         if not rows:
             return None
         events = decode_rows(self.codecs, rows)  # outside the lock: others go on
-        return Batch(rows[0][0], rows[-1][1], token, events)
+        return Batch(tuple(ranges), token, events)
 
     def ack(self, batch: Batch, dead_letters: Sequence[DeadLetter] = ()) -> None:
         """PhyCloud has the batch: delete it, moving ``dead_letters`` aside first."""
@@ -289,23 +303,18 @@ class QueueStore:
         by_id = {event.id: event for event in batch.events} if dead_letters else {}
         rows = [dead_letter_row(self.codecs, by_id[d.queue_id], d) for d in dead_letters]
         self._db.write(
-            lambda cursor: claims.delete_accepted(cursor, batch, rows, now), durable=False
+            lambda cursor: claims.delete_accepted(cursor, batch, rows, now, self.codecs),
+            durable=False,
         )
 
     def take_back_orphaned_leases(self) -> int:
         """Free the events claimed by processes that died (killed, crashed, a container
         removed) without waiting for their leases to run out; the count of leases."""
         now = self._clock()
-        owners = {
-            owner.split(":", 1)[0]
-            for (owner,) in self._db.read(
-                "SELECT DISTINCT owner FROM leases WHERE expires_at > ?", (now,)
-            )
-        }
-        dead = [t for t in owners - {self._owner.token} if not is_alive(self.path, t)]
+        owners = self._db.read("SELECT DISTINCT owner FROM leases WHERE expires_at > ?", (now,))
+        dead = dead_owners(self.path, {owner for (owner,) in owners}, self._owner.token)
         if dead:  # a write only when there is something to take back
             self._db.write(lambda cursor: claims.take_back(cursor, dead))
-        if dead:
             log.warning(
                 "queue %s: took back the claims of %d process(es) that died while sending",
                 self.path,
@@ -315,16 +324,14 @@ class QueueStore:
 
     def release(self, batch: Batch) -> None:
         """Give the batch back unsent: its events are claimable again at once."""
-        self._db.write(
-            lambda cursor: leases.give_back(cursor, batch.first_id, batch.owner), durable=False
-        )
+        self._db.write(lambda cursor: leases.give_back(cursor, batch.owner), durable=False)
 
     def renew(self, batch: Batch) -> bool:
         """Extend the lease while a send is still retrying; False if it had expired
         (another sender may have the events now: send them anyway, PhyCloud dedupes)."""
         now, until = self._clock(), self._clock() + self.lease_s
         return self._db.write(
-            lambda cursor: leases.extend(cursor, batch.first_id, batch.owner, now, until),
+            lambda cursor: leases.extend(cursor, batch.owner, now, until),
             durable=False,
         )
 
@@ -387,9 +394,6 @@ class QueueStore:
                 stats = stats_from(self._db.connection, str(self.path), self._clock())
             except sqlite3.Error as exc:
                 raise queue_error(exc, self.path) from exc
-        deferred = self._db.deferred_counts()
         stats.max_bytes = self.limits.max_bytes
-        stats.extra_drops = {
-            name[5:]: n for name, n in deferred.items() if name.startswith("drop:")
-        }
+        stats.add_deferred(self._db.deferred_counts())
         return stats

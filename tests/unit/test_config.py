@@ -103,7 +103,7 @@ def test_empty_env_values_count_as_unset() -> None:
         ({"PHYCLOUD_ENDPOINT": "api.example.com"}, "PHYCLOUD_ENDPOINT='api.example.com': must be"),
         ({"BATCH_SIZE": "ten"}, "BATCH_SIZE='ten': must be a whole number from 1 to 10000"),
         ({"QUEUE_MAX_BYTES": "12 potatoes"}, "QUEUE_MAX_BYTES='12 potatoes': must be a size"),
-        ({"QUEUE_ON_FULL": "panic"}, "QUEUE_ON_FULL='panic': must be one of drop_oldest"),
+        ({"QUEUE_ON_FULL": "panic"}, "QUEUE_ON_FULL='panic': must be one of thin, drop_oldest"),
         ({"BRIDGE_INPUT": "bag:"}, "BRIDGE_INPUT='bag:': must be ros, dds, sim or bag:PATH"),
         ({"TOPIC_REMAP": "/nope=/x"}, "TOPIC_REMAP='/nope=/x': must be topic=name pairs"),
         ({"TOPICS_DISABLED": "/scan,/laser"}, "TOPICS_DISABLED='/scan,/laser': must be known"),

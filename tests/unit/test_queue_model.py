@@ -1,11 +1,14 @@
 """Model-based test of the queue's whole life, in the manner of Vector's buffer model
-tests: random sequences of put / claim / ack (with dead letters) / release / requeue /
-clock steps / TTL expiry / reopen after a crash, against the real store on a real file
-and a trivial model, under small byte and event caps with both on-full policies.
+tests: random sequences of put (important and periodic events) / claim from either lane
+/ ack (with dead letters) / release / requeue / clock steps / TTL expiry / reopen after
+a crash, against the real store on a real file and a trivial model, under small byte
+and event caps with every on-full policy (thinning included).
 
 Invariants: the store holds exactly the events the model says, in order; every event
-ever put is in exactly one place (queued, delivered, dropped by reason, expired or
-dead-lettered) and each is counted; a full queue drops only what its policy allows.
+ever put is in exactly one place (queued, delivered, thinned, dropped by reason,
+expired or dead-lettered) and each is counted; a full queue drops only what its policy
+allows; an important event is never thinned, and never dropped while a periodic one
+that could have gone instead is left.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from hypothesis.stateful import (
     rule,
 )
 
+from phytrace_edge.queue.claims import BAND_S
 from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import Batch, DeadLetter
@@ -70,11 +74,12 @@ class QueueAccounting(RuleBasedStateMachine):
         self.dead: list[int] = []
         self.fate: Counter[str] = Counter()  # acked, drop:<reason>
         self.requeued = 0
+        self.important: set[int] = set()
         self.incarnation: Counter[int] = Counter()
         self.generation = 0
 
     @initialize(
-        on_full=st.sampled_from(["drop_oldest", "drop_newest"]),
+        on_full=st.sampled_from(["thin", "thin", "drop_oldest", "drop_newest"]),
         max_events=st.sampled_from([None, 8, 25]),
         small_bytes=st.booleans(),
     )
@@ -132,9 +137,10 @@ class QueueAccounting(RuleBasedStateMachine):
 
     # ------------------------------------------------------------------ rules
 
-    @rule(count=st.integers(1, 12), pad=st.integers(100, 1500))
-    def put(self, count: int, pad: int) -> None:
+    @rule(count=st.integers(1, 12), pad=st.integers(100, 1500), mask=st.integers(0, 4095))
+    def put(self, count: int, pad: int, mask: int) -> None:
         seqs = list(range(self.next_seq, self.next_seq + count))
+        classes = [bool(mask >> i & 1) and bool(mask >> (i + 1) & 1) for i in range(count)]
         self.next_seq += count
         events = [
             {
@@ -145,7 +151,8 @@ class QueueAccounting(RuleBasedStateMachine):
         ]
         leased, before = self.leased(), list(self.queue)
         drops_before = self.store.stats().drops
-        result = self.store.put_many(events)
+        result = self.store.put_many(events, classes)
+        self.important.update(s for s, important in zip(seqs, classes, strict=True) if important)
         assert result.accepted + result.dropped == count
 
         stored = self.stored_seqs()
@@ -156,6 +163,12 @@ class QueueAccounting(RuleBasedStateMachine):
         assert not set(removed) & leased, "events being sent are never dropped"
         if self.limits.on_full == "drop_newest":
             assert removed == [], "drop_newest keeps what is queued"
+        elif self.limits.on_full == "thin":
+            kept_old = [s for s in before if s not in set(removed) and s not in leased]
+            if set(removed) & self.important:
+                assert all(s in self.important for s in kept_old), (
+                    "an important event goes only when no periodic one is left"
+                )
         else:
             unleased = [s for s in before if s not in leased]
             assert removed == unleased[: len(removed)], "drop_oldest drops the oldest"
@@ -166,29 +179,84 @@ class QueueAccounting(RuleBasedStateMachine):
 
         dropped_now = len(removed) + count - len(kept_new)
         drops_after = self.store.stats().drops
-        by_cap = sum(
-            drops_after.get(r, 0) - drops_before.get(r, 0) for r in ("cap_bytes", "cap_events")
-        )
+        reasons = ("cap_bytes", "cap_events", "thinned")
+        by_cap = sum(drops_after.get(r, 0) - drops_before.get(r, 0) for r in reasons)
         assert by_cap == dropped_now
-        for reason in ("cap_bytes", "cap_events"):
+        thinned = drops_after.get("thinned", 0) - drops_before.get("thinned", 0)
+        assert thinned <= len([s for s in removed if s not in self.important])
+        if thinned:
+            event("history thinned")
+        for reason in reasons:
             self.fate[f"drop:{reason}"] += drops_after.get(reason, 0) - drops_before.get(reason, 0)
         self.queue = [s for s in before if s not in set(removed)] + kept_new
         for s in kept_new:
             self.queued_at[s] = self.now
 
-    @rule(target=claims, limit=st.integers(1, 10))
-    def claim(self, limit: int) -> Claim | None:
-        leased = self.leased()
+    def live_ranges(self) -> list[tuple[int, int]]:
+        """The id ranges under live leases (a lease may cover ids whose rows are gone)."""
+        return [r for c in self.open_claims if c.expires_at > self.now for r in c.batch.ranges]
+
+    def runs(self, spans: list[tuple[int, int, list[int]]]) -> list[list[list[int]]]:
+        """The unleased rows of these spans (in the order given) in runs that no live
+        lease range interrupts, each row as its seqs."""
+        leased, runs, run = self.live_ranges(), [], []
+        previous: tuple[int, int] | None = None
+        for first, last, seqs in spans:
+            low, high = (
+                (first, last)
+                if previous is None
+                else (min(previous[1] + 1, first), max(previous[0] - 1, last))
+            )
+            if any(lo <= high and low <= hi for lo, hi in leased):
+                if run:
+                    runs.append(run)
+                run = []
+                if any(lo <= last and first <= hi for lo, hi in leased):
+                    previous = None
+                    continue
+            run.append(seqs)
+            previous = (first, last)
+        return [*runs, run] if run else runs
+
+    @rule(target=claims, limit=st.integers(1, 10), important_first=st.booleans())
+    def claim(self, limit: int, important_first: bool) -> Claim | None:
+        """The backfill: the important events of the oldest hour first, else the oldest
+        whole rows up to a leased range."""
+        runs = self.runs(self.stored_spans())
         expected: list[int] = []
-        for row in self.stored_rows():  # the oldest whole rows, up to a leased one
-            if set(row) & leased:
-                if expected:
-                    break
-                continue
+        if important_first and runs:
+            band_end = self.queued_at[runs[0][0][0]] + BAND_S
+            expected = [
+                row[0]
+                for run in runs
+                for row in run
+                if row[0] in self.important and self.queued_at[row[0]] < band_end
+            ][:limit]
+        for row in runs[0] if runs and not expected else []:
             if expected and len(expected) + len(row) > limit:
                 break
             expected += row
-        batch = self.store.claim_batch(limit, 64 * MIB)
+        batch = self.store.claim_batch(limit, 64 * MIB, important_first=important_first)
+        return self._claimed(batch, expected)
+
+    @rule(target=claims, limit=st.integers(1, 10), back_s=st.sampled_from([0.0, 5.0, 60.0]))
+    def claim_live(self, limit: int, back_s: float) -> Claim | None:
+        """The live lane: the newest whole rows put since ``since``, from the newest run
+        of unleased rows."""
+        since = self.now - back_s
+        runs = self.runs(list(reversed(self.stored_spans())))
+        taken: list[list[int]] = []
+        for row in runs[0] if runs else []:
+            if self.queued_at[row[0]] < since:
+                break
+            if taken and sum(map(len, taken)) + len(row) > limit:
+                break
+            taken.append(row)
+        expected = [s for row in reversed(taken) for s in row]
+        event("live lane took events" if expected else "live lane empty")
+        return self._claimed(self.store.claim_live(limit, 64 * MIB, since), expected)
+
+    def _claimed(self, batch: Batch | None, expected: list[int]) -> Claim | None:
         got = [] if batch is None else [seq_of(e.event_id) for e in batch.events]
         assert got == expected
         if batch is None:
@@ -207,7 +275,7 @@ class QueueAccounting(RuleBasedStateMachine):
         within = {
             s
             for first, last, seqs in self.stored_spans()
-            if batch.first_id <= first and last <= batch.last_id
+            if any(low <= first and last <= high for low, high in batch.ranges)
             for s in seqs
         }
         dead = [DeadLetter(events[i].id, "rejected: test") for i in reject if i < len(events)]
@@ -241,6 +309,7 @@ class QueueAccounting(RuleBasedStateMachine):
         for s in self.dead[:moved]:
             self.queued_at[s] = self.now
             self.incarnation[s] += 1
+            self.important.add(s)  # requeued by hand: never thinned
         self.queue += self.dead[:moved]
         self.requeued += moved
         self.dead = self.dead[moved:]
@@ -314,6 +383,7 @@ class QueueAccounting(RuleBasedStateMachine):
         event("frames in the queue" if any(len(row) > 1 for row in rows) else "no frames")
         for row in (row for row in rows if len(row) > 1):
             assert len(row) <= FRAME_EVENTS
+            assert not set(row) & self.important, "an important event is never in a frame"
             newest = max(self.queued_at[s] for s in row)
             assert newest <= self.now - SEAL_AFTER_S, "fresh events are never sealed"
             live = (c for c in self.open_claims if c.expires_at > self.now)
@@ -330,7 +400,7 @@ class QueueAccounting(RuleBasedStateMachine):
         assert stats.depth == len(self.queue)
         assert stats.dead_letters == len(self.dead) == self.store.dead_letters.count()
         assert stats.acked_total == self.fate["acked"]
-        for reason in ("cap_bytes", "cap_events", "ttl", "rejected"):
+        for reason in ("cap_bytes", "cap_events", "thinned", "ttl", "rejected"):
             assert drops.get(reason, 0) == self.fate[f"drop:{reason}"], reason
         put = self.next_seq - 1
         assert stats.queued_total == put
