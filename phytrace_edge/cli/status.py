@@ -48,6 +48,27 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     return exit_code(document)
 
 
+def render_resolution(bands: list[dict[str, Any]]) -> str:
+    """The periodic history's resolution by age, e.g. ``older than 2 h: 1 in 4, last
+    2 h: all`` (important events are always all there)."""
+    parts = []
+    for band in bands:
+        newest, oldest = band["newest_age_s"], band["oldest_age_s"]
+        span = (
+            f"last {format_age(oldest)}"
+            if newest < 60
+            else f"{format_age(newest)}-{format_age(oldest)} ago"
+        )
+        parts.append(f"{span}: {band['keeps']}")
+    return ", ".join(parts)
+
+
+def format_age(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 60:.0f} min" if seconds >= 60 else f"{seconds:.0f} s"
+
+
 def render_status(d: dict[str, Any]) -> str:
     """The status document as a table for people."""
     state = "HEALTHY" if d["healthy"] else ("UNHEALTHY" if d["problems"] else "NOT RUNNING")
@@ -71,6 +92,15 @@ def render_status(d: dict[str, Any]) -> str:
         f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
         f"success {d['last_success_at'] or 'never'}"
     )
+    lanes = d["lanes"]
+    if lanes["live_events_sent"]:
+        lag = lanes["live_lag_s"]
+        lines.append(
+            f"  lanes        live {lanes['live_events_sent']} sent (newest at PhyCloud "
+            f"{lag:.1f} s old), backfill {lanes['backfill_events_sent']} sent"
+        )
+    if d["resolution"]:
+        lines.append(f"  history      {render_resolution(d['resolution'])}")
     if d["last_error"]:
         lines.append(f"  last error   {d['last_error']} at {d['last_error_at']}")
     drops = ", ".join(f"{reason} {n}" for reason, n in d["drops"].items()) or "none"

@@ -118,6 +118,16 @@ class Settings:
     requests_in_flight: int = setting(
         ship.DEFAULT_REQUESTS_IN_FLIGHT, int_between(1, 8), "requests sent at once"
     )
+    live_share: float = setting(
+        ship.DEFAULT_LIVE_SHARE,
+        non_negative_float(1.0),
+        "share of requests for the newest events while a backlog drains (0: oldest first)",
+    )
+    backfill_important_first: bool = setting(
+        ship.DEFAULT_IMPORTANT_FIRST,
+        boolean,
+        "a backlog sends each hour's important events before its periodic ones",
+    )
     bridge_input: str = setting("ros", bridge_input, "where messages come from")
     use_sim_time: bool = setting(False, boolean, "header stamps follow /clock, not the epoch")
     replay_rate: float = setting(

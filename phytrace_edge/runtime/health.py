@@ -110,6 +110,8 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
             "quarantined": stats.quarantined,
             "damaged": stats.damaged,
         },
+        "lanes": _lanes(sender, oldest_age, now),
+        "resolution": stats.resolution,
         "drops": _drops(stats.drops, service),
         "dead_letters": stats.dead_letters,
         "queued_total": stats.queued_total,
@@ -126,6 +128,19 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
         "stages": stages,
         "topics": _topics_now(service.get("topics", {}), heartbeat_age, running),
+    }
+
+
+def _lanes(sender: dict[str, Any], oldest_age: float | None, now: float) -> dict[str, Any]:
+    """The two lanes of the drain: what each delivered, how far behind the present the
+    newest event PhyCloud holds is (``live_lag_s``), and how old the backfill's
+    oldest waiting event is (``backlog_oldest_age_s``)."""
+    newest = sender.get("newest_delivered_at")
+    return {
+        "live_events_sent": sender.get("live_events_sent", 0),
+        "backfill_events_sent": sender.get("backfill_events_sent", 0),
+        "live_lag_s": None if newest is None else round(max(0.0, now - newest), 1),
+        "backlog_oldest_age_s": oldest_age,
     }
 
 

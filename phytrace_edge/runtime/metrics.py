@@ -44,6 +44,22 @@ class BridgeCollector:
             "Age of the oldest queued event.",
             None if stats.oldest_queued_at is None else now - stats.oldest_queued_at,
         )
+        yield gauge(
+            "backlog_oldest_age_seconds",
+            "Age of the oldest event the backfill lane has yet to send.",
+            None if stats.oldest_queued_at is None else now - stats.oldest_queued_at,
+        )
+        yield gauge(
+            "live_lag_seconds",
+            "How old the newest event PhyCloud accepted was, now.",
+            None if sender.newest_delivered_at is None else now - sender.newest_delivered_at,
+        )
+        by_lane = CounterMetricFamily(
+            "phytrace_events_sent_by_lane", "Events PhyCloud accepted, by lane.", labels=["lane"]
+        )
+        by_lane.add_metric(["live"], sender.live_events_sent)
+        by_lane.add_metric(["backfill"], sender.backfill_events_sent)
+        yield by_lane
         yield gauge("dead_letters", "Events kept as dead letters.", stats.dead_letters)
         yield counter("events_built", "UDM events built.", figures.events_built)
         yield counter("events_queued", "Events put into the queue (ever).", stats.queued_total)

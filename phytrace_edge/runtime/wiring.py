@@ -113,6 +113,8 @@ def send_policy(s: Settings) -> SendPolicy:
         batch_size=s.batch_size,
         backlog_batch_size=s.backlog_batch_size,
         requests_in_flight=s.requests_in_flight,
+        live_share=s.live_share,
+        important_first=s.backfill_important_first,
         batch_max_bytes=s.batch_max_bytes,
         flush_interval_s=s.flush_interval_s,
         retry_min_s=s.retry_min_s,

@@ -10,6 +10,8 @@ from phytrace_edge.ship.defaults import (
     DEFAULT_BATCH_SIZE,
     DEFAULT_FLUSH_INTERVAL_S,
     DEFAULT_HTTP_COMPRESSION,
+    DEFAULT_IMPORTANT_FIRST,
+    DEFAULT_LIVE_SHARE,
     DEFAULT_REQUESTS_IN_FLIGHT,
     DEFAULT_RETRY_MAX_S,
     DEFAULT_RETRY_MIN_S,
@@ -18,12 +20,15 @@ from phytrace_edge.ship.defaults import (
 
 @dataclass(frozen=True)
 class SendPolicy:
-    """BATCH_SIZE, BACKLOG_BATCH_SIZE, BATCH_MAX_BYTES, REQUESTS_IN_FLIGHT,
-    FLUSH_INTERVAL_S, RETRY_MIN_S/MAX_S, HTTP_COMPRESSION and UPLOAD_MAX_BPS."""
+    """BATCH_SIZE, BACKLOG_BATCH_SIZE, BATCH_MAX_BYTES, REQUESTS_IN_FLIGHT, LIVE_SHARE,
+    BACKFILL_IMPORTANT_FIRST, FLUSH_INTERVAL_S, RETRY_MIN_S/MAX_S, HTTP_COMPRESSION
+    and UPLOAD_MAX_BPS."""
 
     batch_size: int = DEFAULT_BATCH_SIZE
     backlog_batch_size: int = DEFAULT_BACKLOG_BATCH_SIZE
     requests_in_flight: int = DEFAULT_REQUESTS_IN_FLIGHT
+    live_share: float = DEFAULT_LIVE_SHARE
+    important_first: bool = DEFAULT_IMPORTANT_FIRST
     batch_max_bytes: int = DEFAULT_BATCH_MAX_BYTES
     flush_interval_s: float = DEFAULT_FLUSH_INTERVAL_S
     retry_min_s: float = DEFAULT_RETRY_MIN_S

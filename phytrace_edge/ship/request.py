@@ -10,15 +10,29 @@ from __future__ import annotations
 import gzip
 import hashlib
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import zstandard
 
 from phytrace_edge import __version__
-from phytrace_edge.queue.records import QueuedEvent
+from phytrace_edge.queue.records import Batch, QueuedEvent
 
+# Measured on backlog batches (tools/bench_outage.py): zstd 1 is both faster and
+# smaller than 3 on telemetry; gzip 6 sends 30% fewer bytes than 3 for 2x the CPU,
+# which the pipeline hides behind the request in flight
 GZIP_LEVEL = 6
-ZSTD_LEVEL = 3
+ZSTD_LEVEL = 1
 USER_AGENT = f"phytrace-edge/{__version__}"
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A claimed batch, encoded and ready to go on the wire, and its lane."""
+
+    batch: Batch
+    body: bytes
+    headers: dict[str, str]
+    lane: str = "backfill"
 
 
 def events_body(events: Sequence[QueuedEvent]) -> bytes:

@@ -8,13 +8,15 @@ wait, from ``Retry-After``).
 from __future__ import annotations
 
 import email.utils
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import orjson
 
 from phytrace_edge.errors import EndpointRefusedError, TransientSendError, UnexpectedAnswerError
+
+T = TypeVar("T")
 
 RETRY_AFTER_MAX_S = 3600.0
 RETRYABLE = {408, 425, 429}
@@ -133,3 +135,12 @@ def classify(reply: Reply, batch_size: int, now: float) -> Outcome:
     raise EndpointRefusedError(
         f"HTTP {status}: unexpected answer from PhyCloud - check PHYCLOUD_ENDPOINT", status
     )
+
+
+def split_refused(events: Sequence[T], refused: Refused) -> list[Sequence[T]]:
+    """Parts to resend: around the event PhyCloud blamed, else two halves."""
+    if refused.index is not None and refused.status != 413:
+        i = refused.index
+        return [part for part in (events[:i], events[i : i + 1], events[i + 1 :]) if part]
+    middle = len(events) // 2
+    return [events[:middle], events[middle:]]

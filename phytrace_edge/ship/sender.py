@@ -22,6 +22,7 @@ each in a thread of its own that retries, acks or releases its batch. Every batc
 has its own lease and idempotency key, so two in flight never hold the same event.
 A live batch is BATCH_SIZE events; when more than that is waiting, requests grow to
 BACKLOG_BATCH_SIZE events (or BATCH_MAX_BYTES of compressed body).
+A backlog drains in two lanes (``lanes``): the newest events first after an outage.
 """
 
 from __future__ import annotations
@@ -34,7 +35,6 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
 
 from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
 
@@ -46,9 +46,10 @@ from phytrace_edge.errors import (
 )
 from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.ship.lanes import Lanes
 from phytrace_edge.ship.options import SendPolicy
-from phytrace_edge.ship.request import BodyEncoder, events_body, request_headers
-from phytrace_edge.ship.responses import Accepted, Refused, classify
+from phytrace_edge.ship.request import BodyEncoder, Prepared, events_body, request_headers
+from phytrace_edge.ship.responses import Accepted, Refused, classify, split_refused
 from phytrace_edge.ship.stats import SendStats
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import Transport
@@ -66,15 +67,6 @@ JSON_PER_WIRE_BYTE = 4
 
 class Stopped(Exception):
     """The sender was asked to stop while a batch was still retrying."""
-
-
-@dataclass(frozen=True)
-class Prepared:
-    """A claimed batch, encoded and ready to go on the wire."""
-
-    batch: Batch
-    body: bytes
-    headers: dict[str, str]
 
 
 class Sender:
@@ -104,7 +96,7 @@ class Sender:
         self._deadline: float | None = None
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
         self._encoders = threading.local()  # python-zstandard: one compressor per thread
-        self._failing = False  # the last request failed and is being retried
+        self._lanes = Lanes(policy.live_share, store.now())
         # full jitter between RETRY_MIN_S and the exponential bound (never a tight loop)
         self._backoff = wait_random_exponential(
             multiplier=policy.retry_min_s, max=policy.retry_max_s, min=policy.retry_min_s
@@ -155,9 +147,14 @@ class Sender:
                             self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
                         continue
                     # while requests fail, one at a time: an outage is not hit twice as often
-                    limit = 1 if self._failing else self.policy.requests_in_flight
-                    while len(in_flight) >= limit:
-                        self._settle(in_flight.popleft(), progress)
+                    limit = 1 if self._lanes.failing else self.policy.requests_in_flight
+                    try:
+                        while len(in_flight) >= limit:
+                            self._settle(in_flight.popleft(), progress)
+                    except BaseException:  # claimed, never sent: back at once, not after its lease
+                        with contextlib.suppress(QueueError):
+                            self.store.release(prepared.batch)
+                        raise
                     in_flight.append(posts.submit(self.post, prepared))
                     self._beat()
             finally:
@@ -214,15 +211,28 @@ class Sender:
         if not flush and not due:
             return None
         policy = self.policy
-        size = policy.backlog_batch_size if depth > policy.batch_size else policy.batch_size
-        json_bound = policy.batch_max_bytes
-        if policy.http_compression != "none":
-            json_bound *= JSON_PER_WIRE_BYTE
-        batch = self.store.claim_batch(max(size, policy.batch_size), json_bound)
+        # a backlog goes in big requests, but not while requests fail: a probe of a live
+        # batch finds out whether the link is back without holding a megabyte
+        backlog = depth > policy.batch_size and not self._lanes.failing
+        size = max(policy.backlog_batch_size, policy.batch_size) if backlog else policy.batch_size
+        compressed = policy.http_compression != "none"
+        json_bound = policy.batch_max_bytes * (JSON_PER_WIRE_BYTE if compressed else 1)
+        lane, batch = self._claim(size, json_bound, depth)
         if batch is None:
             return None
         body = self._encoder().encode(events_body(batch.events))
-        return Prepared(batch, body, request_headers(batch.events, policy.http_compression))
+        headers = request_headers(batch.events, policy.http_compression)
+        return Prepared(batch, body, headers, lane)
+
+    def _claim(self, size: int, json_bound: int, depth: int) -> tuple[str, Batch | None]:
+        """The next batch and its lane: the live lane's turn comes LIVE_SHARE of the
+        time while a backlog drains (and at once after an outage); else the backfill."""
+        since = self._lanes.live_turn() if depth > self.policy.batch_size else None
+        if since is not None:
+            batch = self.store.claim_live(size, json_bound, since)
+            if batch is not None:
+                return "live", batch
+        return "backfill", self.store.claim_batch(size, json_bound, self.policy.important_first)
 
     def post(self, prepared: Prepared) -> int:
         """Deliver a prepared batch and ack it; the number of events it held. Released
@@ -237,6 +247,8 @@ class Sender:
                 self.store.release(batch)
             raise
         self.store.ack(batch, dead)
+        newest = max(event.queued_at for event in batch.events)
+        self.stats.delivered(prepared.lane, len(batch.events), newest)
         if dead:
             self.stats.update(add_dead_lettered=len(dead))
             log.error(
@@ -278,7 +290,9 @@ class Sender:
                 )
             ]
         self.stats.update(add_batches_split=1)
-        return [dead for part in _split(events, outcome) for dead in self._deliver(batch, part)]
+        return [
+            dead for part in split_refused(events, outcome) for dead in self._deliver(batch, part)
+        ]
 
     @property
     def _encoding(self) -> str:
@@ -343,7 +357,7 @@ class Sender:
     def _before_retry(self, batch: Batch, state: RetryCallState) -> None:
         exc = state.outcome.exception() if state.outcome else None
         status = getattr(exc, "status", None)
-        self._failing = True
+        self._lanes.failed(self.store.now())
         self.stats.update(
             add_retries=1,
             last_error=str(exc),
@@ -367,7 +381,7 @@ class Sender:
             self.store.renew(batch)
 
     def _record_success(self, events: int, size: int, status: int) -> None:
-        self._failing = False
+        self._lanes.succeeded()
         if 200 <= status < 300:
             self.stats.update(
                 add_events_sent=events,
@@ -378,12 +392,3 @@ class Sender:
             )
         else:
             self.stats.update(last_status=status)
-
-
-def _split(events: Sequence[QueuedEvent], refused: Refused) -> list[Sequence[QueuedEvent]]:
-    """Parts to resend: around the event PhyCloud blamed, else two halves."""
-    if refused.index is not None and refused.status != 413:
-        i = refused.index
-        return [part for part in (events[:i], events[i : i + 1], events[i + 1 :]) if part]
-    middle = len(events) // 2
-    return [events[:middle], events[middle:]]

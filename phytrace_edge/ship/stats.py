@@ -27,6 +27,9 @@ class SendStats:
     last_error: str | None = None
     last_error_at: float | None = None
     last_status: int | None = None
+    live_events_sent: int = 0  # the live lane's: the newest first, after an outage
+    backfill_events_sent: int = 0
+    newest_delivered_at: float | None = None  # when the newest event PhyCloud has was queued
     queue_errors: int = 0
     last_queue_error: str | None = None
     last_queue_error_at: float | None = None
@@ -43,6 +46,16 @@ class SendStats:
                     setattr(self, name[4:], getattr(self, name[4:]) + value)
                 else:
                     setattr(self, name, value)
+
+    def delivered(self, lane: str, events: int, newest_queued_at: float) -> None:
+        """Count a batch PhyCloud accepted, by lane (``live`` or ``backfill``)."""
+        with self.lock:
+            if lane == "live":
+                self.live_events_sent += events
+            else:
+                self.backfill_events_sent += events
+            newest = self.newest_delivered_at
+            self.newest_delivered_at = max(newest or newest_queued_at, newest_queued_at)
 
     def observe_latency(self, seconds: float) -> None:
         """Count one request's duration into the cumulative histogram."""

@@ -1,5 +1,7 @@
-"""The live page's data: per robot, the latest event, its event rate and the recent
-battery and speed series. In memory, for people watching; the record is the store."""
+"""The live page's data: per robot, the latest event, how far behind the present it is
+(``lag_s``: after an outage, how soon the live lane brought the robot's present), its
+event rate and the recent battery and speed series. In memory, for people watching;
+the record is the store."""
 
 from __future__ import annotations
 
@@ -47,22 +49,30 @@ class Board:
             while robot.arrivals and robot.arrivals[0][0] < now - RATE_WINDOW_S:
                 robot.arrivals.popleft()
             recent = [p for p in robot.series if p["t"] >= now - SERIES_SECONDS]
+            latest_at = _captured_at(robot.latest)
             out.append(
                 {
                     "source_id": source_id,
                     "events": robot.events,
                     "rate_eps": round(sum(n for _, n in robot.arrivals) / RATE_WINDOW_S, 2),
                     "latest": robot.latest,
+                    "lag_s": None if latest_at is None else round(max(0.0, now - latest_at), 1),
                     "series": recent,
                 }
             )
         return out
 
 
-def _point(event: dict[str, Any]) -> dict[str, float] | None:
+def _captured_at(event: dict[str, Any]) -> float | None:
     try:
-        t = datetime.fromisoformat(str(event["captured_at"]).replace("Z", "+00:00")).timestamp()
+        return datetime.fromisoformat(str(event["captured_at"]).replace("Z", "+00:00")).timestamp()
     except (KeyError, ValueError):
+        return None
+
+
+def _point(event: dict[str, Any]) -> dict[str, float] | None:
+    t = _captured_at(event)
+    if t is None:
         return None
     point = {"t": t}
     soc = event.get("power", {}).get("battery", {}).get("state_of_charge_pct")

@@ -6,7 +6,9 @@ from __future__ import annotations
 import shutil
 import struct
 import subprocess
+import time
 import zlib
+from datetime import datetime
 from pathlib import Path
 
 import httpx
@@ -100,6 +102,11 @@ def test_live_page_shows_each_robot(tmp_path: Path, stub) -> None:
     assert f"{2 * len(events)} events stored" in dom
     soc = events[-1]["power"]["battery"]["state_of_charge_pct"]
     assert f"{soc:.1f} %" in dom  # the latest battery value of the robot
+    robots = httpx.get(f"{stub.endpoint}/robots").json()["robots"]
+    newest = max(e["captured_at"] for e in events)
+    lag = time.time() - datetime.fromisoformat(newest.replace("Z", "+00:00")).timestamp()
+    assert all(abs(robot["lag_s"] - lag) < 30 for robot in robots), "lag from the newest event"
+    assert "s behind now" in dom
 
     shot = tmp_path / "page.png"
     chromium(tmp_path, f"--screenshot={shot}", f"{stub.url}/")
