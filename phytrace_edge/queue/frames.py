@@ -85,7 +85,10 @@ class Sealer:
 
     def seal(self, cursor: sqlite3.Cursor, now: float) -> int:
         """Seal up to ``SEAL_MAX_FRAMES`` frames of rows queued before
-        ``now - SEAL_AFTER_S`` that no lease covers; the number of frames made."""
+        ``now - SEAL_AFTER_S`` that no lease covers; the number of frames made. Frames
+        of one event are no frames: ``frame_events=1`` turns sealing off."""
+        if self.frame_events < 2:
+            return 0
         cutoff, made = now - SEAL_AFTER_S, 0
         for low, high in leases.free_ranges(cursor, now):
             for run in self._runs(cursor, max(low, self.sealed_below), high, cutoff):

@@ -56,6 +56,15 @@ def test_old_events_are_sealed_into_frames_that_read_back_exactly(open_store, cl
     assert store.stats().depth == 11 and store.stats().acked_total == 20
 
 
+def test_frames_of_one_event_turn_sealing_off(open_store, clock) -> None:
+    store = open_store(frame_events=1)
+    fill(store, clock, 0, 30)
+    clock.now += SEAL_AFTER_S
+    with store._db.transaction() as cursor:
+        assert store._sealer.seal(cursor, clock.now) == 0, "nothing is packed"
+    assert [count for _, _, count in rows(store)] == [1] * 30
+
+
 def test_a_claim_always_takes_at_least_one_whole_frame(open_store, clock) -> None:
     store = open_store(frame_events=10)
     fill(store, clock, 0, 10)
