@@ -26,12 +26,13 @@ from phytrace_edge.queue.sqlite_errors import queue_error
 
 T = TypeVar("T")
 _NORMAL = 1  # PRAGMA synchronous: 0 OFF, 1 NORMAL, 2 FULL, 3 EXTRA
-CACHE_KIB = 8000  # SQLite's page cache: 8 MiB, whatever the backlog
+CACHE_KIB = 2000  # SQLite's page cache (its default): the file is in the OS's cache anyway
 
 
 def configure(connection: sqlite3.Connection, sync: str) -> None:
     """The queue's connection settings (QUEUE_SYNC is ``full`` or ``normal``)."""
     connection.execute(f"PRAGMA synchronous = {'FULL' if sync == 'full' else 'NORMAL'}")
+    connection.execute("PRAGMA shrink_memory")  # what the check at open read
     connection.execute(f"PRAGMA cache_size = -{CACHE_KIB}")
     # Some builds zero every freed page, so that an ack writes every page it frees (an
     # ack of 50 plain events: 239 KB of WAL, against 33 KB with FAST, which clears only

@@ -22,7 +22,9 @@ class Lanes:
         self._live_since = now  # queue time since which events are the live lane's
         self._credit = 0.0  # grows by LIVE_SHARE per request; 1 buys a live one
         self._failed_at: float | None = None
-        self.failing = False  # the last request failed and is being retried
+        # the last request failed and is being retried; and before the first got
+        # through, nothing says the link is up: until then requests are small probes
+        self.failing = True
 
     def live_turn(self) -> float | None:
         """For a request of a backlog: ``since`` when it is the live lane's turn."""

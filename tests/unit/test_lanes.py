@@ -71,13 +71,13 @@ def test_the_first_request_after_an_outage_carries_the_newest_events(store, cloc
     put(store, 0, 500)
     cloud = Outage(store, clock)
     s = sender(store, cloud, live_share=0.2)
-    s.send_next_batch()  # fails once (the outage), then the retry gets through
-    assert seqs_of(cloud.requests[1]) == list(range(100))
+    s.send_next_batch()  # a probe fails (the outage), then its retry gets through
+    assert seqs_of(cloud.requests[1]) == list(range(10))
     s.send_next_batch()
     assert seqs_of(cloud.requests[2]) == list(range(1000, 1030)), "then the present"
     s.send_next_batch()
-    assert seqs_of(cloud.requests[3]) == list(range(100, 200)), "then the backfill"
-    assert s.stats.live_events_sent == 30 and s.stats.backfill_events_sent == 200
+    assert seqs_of(cloud.requests[3]) == list(range(10, 110)), "then the backfill"
+    assert s.stats.live_events_sent == 30 and s.stats.backfill_events_sent == 110
     assert s.stats.newest_delivered_at == clock.now
 
 
@@ -96,6 +96,7 @@ def test_the_live_lane_gets_its_share_of_a_backlog(store, clock) -> None:
     clock.now += 10  # the bridge starts on a backlog: what it queues from now on is live
     cloud = FakeCloud()
     s = sender(store, cloud, live_share=0.25)
+    s._lanes.succeeded()  # the link is known to be up
     for n in range(8):  # the robot keeps queueing 5 events per request
         put(store, 10_000 + 5 * n, 5)
         s.send_next_batch()
@@ -108,6 +109,8 @@ def test_the_live_lane_gets_its_share_of_a_backlog(store, clock) -> None:
 
 def test_lanes_turns_follow_the_share_and_an_outage() -> None:
     lanes = Lanes(live_share=0.5, now=100.0)
+    assert lanes.failing, "until a request gets through, nothing says the link is up"
+    lanes.succeeded()
     assert [lanes.live_turn() for _ in range(4)] == [None, 100.0, None, 100.0]
     lanes.failed(200.0)
     assert lanes.failing
