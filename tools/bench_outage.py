@@ -94,14 +94,20 @@ def outage(base: list[dict], count: int, start: float) -> Iterator[tuple[float, 
 # ---------------------------------------------------------------- at rest
 
 
-def fill(path: Path, base: list[dict], count: int, frame_events: int | None = None) -> float:
+def fill(
+    path: Path,
+    base: list[dict],
+    count: int,
+    frame_events: int | None = None,
+    limits: QueueLimits | None = None,
+) -> float:
     """Queue ``count`` events through ``put_many``, one second of events per commit;
     the fill's wall time."""
     clock = [time.time() - count / RATE_HZ]
     options = {"frame_events": frame_events} if frame_events else {}
     store = QueueStore.open(
         path,
-        limits=QueueLimits(max_bytes=16 * GIB),
+        limits=limits or QueueLimits(max_bytes=16 * GIB),
         sync="normal",
         clock=lambda: clock[0],
         **options,
@@ -184,9 +190,10 @@ def vm_kib(pid: int, field: str) -> int:
 class Receiver:
     """tools/fast_receiver.py in its own process."""
 
-    def __init__(self, delay_ms: float = 0) -> None:
+    def __init__(self, delay_ms: float = 0, port: int = 0) -> None:
+        command = [sys.executable, str(TOOLS / "fast_receiver.py"), "--delay-ms", str(delay_ms)]
         self.process = subprocess.Popen(
-            [sys.executable, str(TOOLS / "fast_receiver.py"), "--delay-ms", str(delay_ms)],
+            [*command, "--port", str(port)],
             stdout=subprocess.PIPE,
             text=True,
             env=python_env(),
