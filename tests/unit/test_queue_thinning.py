@@ -11,9 +11,11 @@ import random
 import orjson
 import pytest
 
+from phytrace_edge.cli.status import render_status
 from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import QueuedEvent
+from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import Clock, event
 
@@ -86,6 +88,10 @@ def test_status_reports_the_resolution_left_by_age(open_store, clock) -> None:
     assert ages == sorted(ages, reverse=True), "bands go from the oldest to the newest"
     important = 1  # event 0
     assert sum(band["events"] for band in bands) + important == store.stats().depth
+    document = report(store.stats(), Thresholds(10.0, 300.0, 0.8, CAP.max_bytes), clock.now)
+    history = next(line for line in render_status(document).splitlines() if "history" in line)
+    assert history.endswith(": all") and f": {bands[0]['keeps']}," in history, history
+    assert document["lanes"]["backlog_oldest_age_s"] == bands[0]["oldest_age_s"]
 
 
 def test_drop_oldest_cuts_the_history_off_instead(open_store, clock) -> None:
