@@ -80,8 +80,12 @@ def thin_oldest(
                 kept = None
                 continue
             events = split_frame(codecs.decode(row[7], row[8], row[9]), count)
-            # a frame keeps every other event; a single row, every other id of its level
-            halved = events[::2] if count > 1 else events[: 1 - (row_id >> thin_level) % 2]
+            # a frame keeps every other event, always its newest (so its newest_at, the
+            # TTL's clock, stays exact); a single row, every other id of its level
+            if count > 1:
+                halved = events[(count - 1) % 2 :: 2]
+            else:
+                halved = events[: 1 - (row_id >> thin_level) % 2]
             if (
                 kept is None
                 or (kept.level, kept.free_range) != (thin_level, where)

@@ -49,6 +49,11 @@ db.execute("ROLLBACK")
 def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
     tmp_path: Path, stub
 ) -> None:
+    """While another process holds the write lock the sender meets it on its next claim
+    (it claims every FLUSH_INTERVAL_S), counts it, and the robot's events keep being
+    built; once the lock is gone sending resumes and nothing is lost. (Whether `status`
+    names the problem depends on whether a send succeeded since; the verdict itself is
+    tested in tests/unit/test_health.py.)"""
     settings = load_settings(
         env={
             "PHYCLOUD_ENDPOINT": stub.endpoint,
@@ -56,9 +61,6 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
             "BRIDGE_INPUT": "sim",
             "SAMPLE_RATE_HZ": "20",
             "FLUSH_INTERVAL_S": "0.2",
-            # the sender may meet the lock only once, then wait out its retry; on a busy
-            # machine status must still count that error as recent when it reads it
-            "HEALTH_STALE_S": "120",
         }
     ).settings
     built: list[str] = []
@@ -67,9 +69,6 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
     holder = None
     try:
         wait_for(lambda: service.sender.stats.events_sent > 10, 30, "the first sends")
-        # PhyCloud refuses for now: a request getting through after the queue error
-        # would rightly clear the problem before the status below could show it
-        stub.set_faults(fixed_status=503)
         holder = subprocess.Popen(
             [sys.executable, "-c", HOLD_LOCK, str(tmp_path / "queue.db")],
             stdin=subprocess.PIPE,
@@ -79,17 +78,19 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
         assert holder.stdout.readline().strip() == "locked"
         # the writer, the heartbeat and the sender each wait out the busy timeout in turn
         wait_for(lambda: service.sender.stats.queue_errors > 0, 60, "the sender to meet the lock")
+        during = len(built)
+        wait_for(lambda: len(built) > during + 20, 30, "the robot's events built meanwhile")
         holder.communicate("release\n", timeout=30)
-        service.heartbeat(running=True)  # as the heartbeat thread does once it can write
+        sent = service.sender.stats.events_sent
+        wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
+        service.heartbeat(running=True)
         after = report(
             read_stats(wiring.queue_path(settings), time.time()),
             wiring.health_thresholds(settings),
             time.time(),
         )
-        assert any("cannot use the queue" in p for p in after["problems"]), after["problems"]
-        stub.set_faults(fixed_status=None)
-        sent = service.sender.stats.events_sent
-        wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
+        assert after["queue_errors"] == service.sender.stats.queue_errors > 0
+        assert after["healthy"], after["problems"]  # sending works again
     finally:
         if holder is not None and holder.poll() is None:
             holder.kill()

@@ -59,3 +59,13 @@ def test_stages_of_a_stopped_service_are_not_judged() -> None:
     assert doc["problems"] == [] and not doc["running"] and exit_code(doc) == 3
     doc = report(stats(heartbeat_age=120.0, stages={"sender": stage(500.0)}), LIMITS, NOW)
     assert doc["problems"] == ["heartbeat is 120 s old: the service hung or died"]
+
+
+def test_a_queue_error_since_the_last_success_is_a_problem_until_a_send_succeeds() -> None:
+    error = {"last_queue_error": "database is locked", "last_queue_error_at": NOW - 3}
+    locked = report(stats(sender={"last_success_at": NOW - 10, **error}), LIMITS, NOW)
+    assert locked["problems"] == ["the sender cannot use the queue: database is locked"]
+    recovered = report(stats(sender={"last_success_at": NOW - 1, **error}), LIMITS, NOW)
+    assert recovered["healthy"]
+    old = {"last_queue_error": "database is locked", "last_queue_error_at": NOW - 60}
+    assert report(stats(sender={"last_success_at": NOW - 100, **old}), LIMITS, NOW)["healthy"]
