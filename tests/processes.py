@@ -144,16 +144,21 @@ class StubProcess:
     def stats(self) -> dict[str, Any]:
         return httpx.get(f"{self.endpoint}/stats", timeout=5).json()
 
-    def event_ids(self) -> list[str]:
-        ids, after = [], 0
+    def events(self) -> list[dict[str, Any]]:
+        """Every event the stub stored, in the order it stored them."""
+        events: list[dict[str, Any]] = []
+        after = 0
         while True:
             page = httpx.get(
                 f"{self.endpoint}/events", params={"after": after, "limit": 10000}, timeout=30
             ).json()
-            ids += [event["event_id"] for event in page["events"]]
+            events += page["events"]
             if not page["events"]:
-                return ids
+                return events
             after = page["next_after"]
+
+    def event_ids(self) -> list[str]:
+        return [event["event_id"] for event in self.events()]
 
     def set_faults(self, **faults: Any) -> dict[str, Any]:
         return httpx.put(f"{self.endpoint}/faults", json=faults, timeout=5).json()

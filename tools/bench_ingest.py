@@ -185,7 +185,7 @@ def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
     dispatcher = Dispatcher(builder.add_reading)
     started = time.perf_counter()
     feed = Feed(dispatcher.on_message, lambda at: builder.build_event(captured_at_s=at), 0.2)
-    replay(str(bag), {topic: topic for topic in TOPIC_BY_NAME}, feed, clock, 0, th.Event())
+    replay(str(bag), {topic: topic for topic in TOPIC_BY_NAME}, {}, feed, clock, 0, th.Event())
     ours = messages / (time.perf_counter() - started)
     return messages, bare, ours
 

@@ -97,6 +97,9 @@ def main() -> int:
         "QUEUE_PATH": str(STATE / "queue.db"),
         "SOURCE_ID": os.environ.get("SOURCE_ID", "demo-robot-001"),
         "FLUSH_INTERVAL_S": "1",
+        # beyond the table: the motor's temperature when it changes, and health every 10 s
+        "TOPICS_EXTRA": os.environ.get("TOPICS_EXTRA", "/motor/temperature mode=on_change"),
+        "HEALTH_EVENT_INTERVAL_S": os.environ.get("HEALTH_EVENT_INTERVAL_S", "10"),
         "PYTHONUNBUFFERED": "1",
     }
     with (STATE / "stub.log").open("a") as stub_log, (STATE / "bridge.log").open("a") as log:

@@ -18,10 +18,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from phytrace_edge.builder.envelope import classify_stamp, envelope
 from phytrace_edge.ingest.convert import MM, compass_heading_deg, present, rounded
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
-from phytrace_edge.udm.event import format_timestamp
-from phytrace_edge.udm.schema import SCHEMA_VERSION
 
 EVENT_TYPE_PERIODIC = "telemetry.periodic"
 DOMAINS = (
@@ -36,8 +35,6 @@ DOMAINS = (
 )
 MOVING_SPEED_MPS = 0.05
 ROTATING_RATE_DPS = 2.0
-EPOCH_2000_S = 946_684_800.0
-FUTURE_TOLERANCE_S = 86_400.0
 
 
 @dataclass(frozen=True)
@@ -63,18 +60,6 @@ def is_fresh(topic: str, latest: Latest, now_mono_s: float, stale_after_s: float
     if TOPIC_BY_NAME[topic].latched:
         return True
     return now_mono_s - latest.received_mono_s <= stale_after_s
-
-
-def classify_stamp(stamp_ns: int | None, now_wall_s: float, use_sim_time: bool) -> dict[str, Any]:
-    """A header stamp as ``{"clock": ..., "stamp" | "stamp_s": ...}`` (see module doc)."""
-    if stamp_ns is None:
-        return {"clock": "none"}
-    seconds = stamp_ns / 1e9
-    if use_sim_time:
-        return {"clock": "sim", "stamp_s": round(seconds, 6)}
-    if EPOCH_2000_S <= seconds <= now_wall_s + FUTURE_TOLERANCE_S:
-        return {"clock": "epoch", "stamp": format_timestamp(seconds)}
-    return {"clock": "non_epoch", "stamp_s": round(seconds, 6)}
 
 
 def assemble_event(
@@ -106,15 +91,7 @@ def assemble_event(
             if topic in fresh
         ]
 
-    event: dict[str, Any] = {
-        "event_id": event_id,
-        "event_type": EVENT_TYPE_PERIODIC,
-        "schema_version": SCHEMA_VERSION,
-        "captured_at": format_timestamp(captured_at_s),
-        "source_id": identity["source_id"],
-        "source_type": identity["source_type"],
-        "identity": dict(identity),
-    }
+    event = envelope(identity, EVENT_TYPE_PERIODIC, captured_at_s, event_id)
     domains = {
         "location": (_location(readings), ("/odom", "/gps/fix", "/imu/data")),
         "motion": (_motion(readings), ("/odom", "/imu/data", "/cmd_vel")),

@@ -4,6 +4,10 @@ Handler callbacks may arrive on any thread (rclpy multi-threaded executors, the 
 listener thread); ``add_reading`` and ``build`` are serialised by one lock, and the
 event itself is assembled outside it from an atomic snapshot.
 
+Besides the one ``telemetry.periodic`` event, a tick takes the side events that came
+in since the last one (``side_events``): ``log.record`` from ``/rosout``
+(``log_records.py``) and ``telemetry.topic`` from ``TOPICS_EXTRA`` (``topic_events.py``).
+
 Each event is built with its class (docs/udm.md, "Event classes"): *important* when it
 carries something that must never be thinned from a backlog (a diagnostics status
 entering or leaving ERROR/STALE, a delivery or task transition, a new goal, or the
@@ -20,7 +24,10 @@ from typing import Any, NamedTuple, Protocol
 
 from phytrace_edge.builder.accumulate import DiagnosticsTracker, GoalTracker, TransitionTracker
 from phytrace_edge.builder.assemble import DOMAINS, Latest, Snapshot, assemble_event, is_fresh
+from phytrace_edge.builder.log_records import LogRecords, log_event
 from phytrace_edge.builder.options import BuilderOptions
+from phytrace_edge.builder.topic_events import TopicEvents, topic_event
+from phytrace_edge.ingest.generic import FieldTypes, rosidl_field_types
 from phytrace_edge.udm.event import new_event_id
 
 
@@ -52,7 +59,13 @@ class Built(NamedTuple):
 class UDMBuilder:
     """Latest values in, one UDM event per ``build_event`` call out."""
 
-    def __init__(self, options: BuilderOptions, clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        options: BuilderOptions,
+        clock: Clock | None = None,
+        field_types: FieldTypes = rosidl_field_types,
+    ) -> None:
+        """``field_types`` describes the input's messages (``ingest.generic``)."""
         self._identity = options.identity.as_dict()
         self._stale_after_s = options.stale_after_s
         self._use_sim_time = options.use_sim_time
@@ -64,10 +77,20 @@ class UDMBuilder:
         self._goals = GoalTracker()
         self._last_data_mono: float | None = None  # when the last event with data was built
         self.stale_omissions: Counter[str] = Counter()
+        self.logs = LogRecords(options.rosout_min_level, options.rosout_burst)
+        self.extra = TopicEvents(options.extra_topics, field_types, options.extra_max_array)
+
+    @property
+    def identity(self) -> dict[str, str]:
+        """The UDM ``identity`` of this robot."""
+        return dict(self._identity)
 
     def add_reading(self, topic: str, reading: dict[str, Any]) -> None:
         """Record ``reading`` as the latest of ``topic`` (a canonical topic name)."""
         now_mono, now_wall = self._clock.monotonic(), self._clock.wall()
+        if topic == "/rosout":
+            self.logs.observe(reading, now_mono)
+            return
         with self._lock:
             self._latest[topic] = Latest(reading, now_mono)
             if topic == "/diagnostics":
@@ -76,6 +99,33 @@ class UDMBuilder:
                 self._transitions.observe(reading, now_wall)
             elif topic == "/goal_pose":
                 self._goals.observe(reading, now_wall)
+
+    def add_message(self, topic: str, msg: Any) -> None:
+        """A message of a ``TOPICS_EXTRA`` topic (any type)."""
+        if self.extra.wants(topic):
+            self.extra.offer(topic, msg, self._clock.monotonic())
+
+    def side_events(self, captured_at_s: float | None = None) -> list[Built]:
+        """The log records and extra-topic events that came in since the last call.
+        Log records and on-change samples are important; sampled topics periodic."""
+        now_mono = self._clock.monotonic()
+        captured_at = self._clock.wall() if captured_at_s is None else captured_at_s
+        sim = self._use_sim_time
+        built = [
+            Built(log_event(self._identity, record, captured_at, sim), True)
+            for record, _ in self.logs.take()
+        ]
+        for sample in self.extra.take(now_mono):
+            event = topic_event(self._identity, sample, captured_at, now_mono, sim)
+            built.append(Built(event, sample.mode == "on_change"))
+        return built
+
+    def side_counts(self) -> dict[str, dict[str, int]]:
+        """What became of /rosout records and extra-topic messages, per topic."""
+        logs = {
+            what: self.logs.counts[what] for what in ("records", "suppressed", "below_level", "own")
+        }
+        return {"/rosout": logs, **self.extra.stats()}
 
     def build_event(self, captured_at_s: float | None = None) -> dict[str, Any]:
         """The event for this tick; ``captured_at_s`` overrides the wall clock (replay)."""

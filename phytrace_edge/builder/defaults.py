@@ -3,3 +3,6 @@ without importing the stage)."""
 
 DEFAULT_SAMPLE_RATE_HZ = 5.0
 DEFAULT_STALE_AFTER_S = 5.0
+ROSOUT_LEVELS = ("debug", "info", "warn", "error", "fatal")
+DEFAULT_ROSOUT_MIN_LEVEL = "warn"
+DEFAULT_ROSOUT_BURST = 20  # records per logger per minute; the rest are counted

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from phytrace_edge.builder.defaults import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
+from phytrace_edge.builder.defaults import (
+    DEFAULT_ROSOUT_BURST,
+    DEFAULT_ROSOUT_MIN_LEVEL,
+    DEFAULT_SAMPLE_RATE_HZ,
+    DEFAULT_STALE_AFTER_S,
+)
+from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY
+from phytrace_edge.ingest.topics import ExtraTopic
 
 
 @dataclass(frozen=True)
@@ -22,9 +29,14 @@ class Identity:
 
 @dataclass(frozen=True)
 class BuilderOptions:
-    """SAMPLE_RATE_HZ, STALE_AFTER_S and USE_SIM_TIME, for one robot."""
+    """SAMPLE_RATE_HZ, STALE_AFTER_S, USE_SIM_TIME, TOPICS_EXTRA and the /rosout
+    settings, for one robot."""
 
     identity: Identity
     sample_rate_hz: float = DEFAULT_SAMPLE_RATE_HZ
     stale_after_s: float = DEFAULT_STALE_AFTER_S
     use_sim_time: bool = False
+    extra_topics: tuple[ExtraTopic, ...] = ()
+    extra_max_array: int = DEFAULT_EXTRA_MAX_ARRAY
+    rosout_min_level: str = DEFAULT_ROSOUT_MIN_LEVEL
+    rosout_burst: int = DEFAULT_ROSOUT_BURST

@@ -44,17 +44,24 @@ class Sampler:
 
     def tick(self, captured_at_s: float | None = None) -> bool:
         """Build and emit the event of this tick; ``captured_at_s`` overrides the wall
-        clock (a replay's timeline). An event with no domain (nothing fresh was heard)
+        clock (a replay's timeline). The side events (logs, extra topics) go first. An
+        event with no domain (nothing fresh was heard)
         is not worth sending: it is not emitted, and the tick returns False."""
         if self._before_tick is not None:
             self._before_tick()
         self.ticks += 1
+        self.flush_side_events(captured_at_s)
         built = self.builder.build(captured_at_s)
         if not any(domain in built.event for domain in DOMAINS):
             self.empty_ticks += 1
             return False
         self._emit(built)
         return True
+
+    def flush_side_events(self, captured_at_s: float | None = None) -> None:
+        """Emit the log records and extra-topic events that came in (also at a stop)."""
+        for side in self.builder.side_events(captured_at_s):
+            self._emit(side)
 
     def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:
         """Tick every period until ``stop``. Ticks are scheduled on the monotonic clock

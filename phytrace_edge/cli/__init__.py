@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 # command -> its module, imported when used: one run of the CLI needs one of them
 COMMANDS = {
     name: f"phytrace_edge.cli.{name.replace('-', '_')}"
-    for name in ("run", "status", "drain", "config", "sim", "dead-letters", "stub")
-}
+    for name in ("run", "status", "drain", "config", "sim", "dead-letters", "stub", "export")
+} | {"import": "phytrace_edge.cli.import_files"}  # `import` is a Python keyword
 DESCRIPTION = "PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud."
 
 

@@ -92,6 +92,8 @@ def render_status(d: dict[str, Any]) -> str:
         f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
         f"success {d['last_success_at'] or 'never'}"
     )
+    if d["exported_total"]:
+        lines.append(f"  exported     {d['exported_total']} in hand-carry files (export)")
     lanes = d["lanes"]
     if lanes["live_events_sent"]:
         lag = lanes["live_lag_s"]

@@ -15,7 +15,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from phytrace_edge.builder.defaults import DEFAULT_SAMPLE_RATE_HZ, DEFAULT_STALE_AFTER_S
+from phytrace_edge.builder.defaults import (
+    DEFAULT_ROSOUT_BURST,
+    DEFAULT_ROSOUT_MIN_LEVEL,
+    DEFAULT_SAMPLE_RATE_HZ,
+    DEFAULT_STALE_AFTER_S,
+    ROSOUT_LEVELS,
+)
+from phytrace_edge.config.extra_topics import topics_extra
 from phytrace_edge.config.parsers import (
     KNOWN_TOPICS,
     boolean,
@@ -37,7 +44,7 @@ from phytrace_edge.config.parsers import (
     topic_remap,
     topic_set,
 )
-from phytrace_edge.ingest.defaults import DEFAULT_REPLAY_RATE
+from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY, DEFAULT_REPLAY_RATE
 from phytrace_edge.queue import defaults as queue
 from phytrace_edge.redact import Secret
 from phytrace_edge.ship import defaults as ship
@@ -48,9 +55,11 @@ if TYPE_CHECKING:
     from typing import Any
 
     from phytrace_edge.ingest.qos import QosChoice
+    from phytrace_edge.ingest.topics import ExtraTopic
 
 SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
 DEFAULT_SHUTDOWN_GRACE_S = 5.0
+DEFAULT_HEALTH_EVENT_INTERVAL_S = 60.0
 
 
 class Setting:
@@ -192,6 +201,27 @@ class Settings:
     topic_qos: dict[str, QosChoice] = setting(
         None, optional(topic_qos), "per-topic QoS instead of matching, /scan=best_effort,..."
     )
+    topics_extra: tuple[ExtraTopic, ...] = setting(
+        (), topics_extra, "other topics sent as telemetry.topic events: '/tf rate_hz=10; ...'"
+    )
+    extra_max_array: int = setting(
+        DEFAULT_EXTRA_MAX_ARRAY,
+        int_between(1, 100_000),
+        "longer arrays of an extra topic are sent as {len, head}",
+    )
+    rosout_min_level: str = setting(
+        DEFAULT_ROSOUT_MIN_LEVEL, one_of(*ROSOUT_LEVELS), "/rosout records sent from this level"
+    )
+    rosout_burst: int = setting(
+        DEFAULT_ROSOUT_BURST,
+        int_between(1, 100_000),
+        "/rosout records per logger per minute; the rest are counted",
+    )
+    health_event_interval_s: float = setting(
+        DEFAULT_HEALTH_EVENT_INTERVAL_S,
+        non_negative_float(86400),
+        "a bridge.health event every this many seconds and on a change (0 = none)",
+    )
     metrics_port: int = setting(0, int_between(0, 65535), "Prometheus endpoint port, 0 = off")
     metrics_host: str = setting("127.0.0.1", identifier, "address the metrics endpoint binds")
     health_stale_s: float = setting(
@@ -213,6 +243,12 @@ class Settings:
         remap = self.topic_remap or {}
         prefix = self.topic_namespace or ""
         return {t: remap.get(t, prefix + t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
+
+    @property
+    def extra_topics(self) -> dict[str, str]:
+        """TOPICS_EXTRA's topics: name -> name subscribed on the robot (namespaced)."""
+        prefix = self.topic_namespace or ""
+        return {extra.name: prefix + extra.name for extra in self.topics_extra}
 
     def __init__(self, **values: Any) -> None:
         unknown = set(values) - set(_SETTINGS)

@@ -2,3 +2,4 @@
 without importing the stage)."""
 
 DEFAULT_REPLAY_RATE = 1.0  # a bag at its recorded speed
+DEFAULT_EXTRA_MAX_ARRAY = 256  # longer arrays of an extra topic become {len, head}

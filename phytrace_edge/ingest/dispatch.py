@@ -16,7 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest import handlers, status
+from phytrace_edge.ingest import handlers, rosout, status
 from phytrace_edge.ingest.handlers import Reading
 from phytrace_edge.ingest.topics import TOPICS
 
@@ -29,16 +29,22 @@ def handler_of(name: str) -> Callable[[Any], Reading]:
     """The handler a topic table entry names (``module:function``)."""
     module, _, function = name.partition(":")
     found: Callable[[Any], Reading] = getattr(
-        {"handlers": handlers, "status": status}[module], function
+        {"handlers": handlers, "status": status, "rosout": rosout}[module], function
     )
     return found
 
 
 class Dispatcher:
-    """Routes a message to its topic's handler and the reading to ``on_reading``."""
+    """Routes a message to its topic's handler and the reading to ``on_reading``; a
+    message of a topic outside the table (``TOPICS_EXTRA``) goes to ``on_other`` as it
+    is, to be converted generically when it is due."""
 
-    def __init__(self, on_reading: Callable[[str, Reading], None]) -> None:
-        self._on_reading = on_reading
+    def __init__(
+        self,
+        on_reading: Callable[[str, Reading], None],
+        on_other: Callable[[str, Any], None] = lambda topic, msg: None,
+    ) -> None:
+        self._on_reading, self._on_other = on_reading, on_other
         self._handlers = {spec.name: handler_of(spec.handler) for spec in TOPICS}
         self._lock = threading.Lock()
         self._last_logged: dict[tuple[str, str], float] = {}
@@ -49,8 +55,12 @@ class Dispatcher:
         """Handle one message of canonical ``topic``; never raises."""
         with self._lock:
             self.received[topic] += 1
+        handler = self._handlers.get(topic)
+        if handler is None:
+            self._on_other(topic, msg)
+            return
         try:
-            reading = self._handlers[topic](msg)
+            reading = handler(msg)
         except MalformedMessage as exc:
             self._reject(topic, exc.reason, exc.detail)
             return

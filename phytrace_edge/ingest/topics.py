@@ -1,4 +1,5 @@
-"""The topic table: the ten ROS 2 topics of the reference guide and how each is read.
+"""The topic table: the ten ROS 2 topics of the reference guide, ``/rosout``, and how
+each is read; and ``ExtraTopic``, an entry of ``TOPICS_EXTRA`` (any other topic).
 
 Two flags say how a topic's messages are treated:
 
@@ -97,7 +98,50 @@ TOPICS: tuple[TopicSpec, ...] = (
         every_message=True,
         latched=True,
     ),
+    TopicSpec(
+        "/rosout", "rcl_interfaces/msg/Log", "rosout:handle_log", (), every_message=True
+    ),  # ROS logs: log.record events, not a domain
 )
 
 TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
 TOPIC_NAMES = tuple(TOPIC_BY_NAME)
+
+EXTRA_MODES = ("sample", "on_change")
+
+
+class ExtraTopic:
+    """One entry of ``TOPICS_EXTRA``: a topic outside the table, shipped as
+    ``telemetry.topic`` events (docs/configuration.md, "Any other topic").
+
+    ``type_name`` may be empty: the input then takes it from the graph or the bag.
+    ``mode`` ``sample`` sends the latest message at most ``rate_hz`` times a second;
+    ``on_change`` only when its data changed (numbers by more than ``deadband``)."""
+
+    __slots__ = ("deadband", "mode", "name", "rate_hz", "type_name")
+
+    def __init__(
+        self,
+        name: str,
+        type_name: str = "",
+        rate_hz: float = 1.0,
+        mode: str = "sample",
+        deadband: float = 0.0,
+    ) -> None:
+        self.name, self.type_name, self.rate_hz = name, type_name, rate_hz
+        self.mode, self.deadband = mode, deadband
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ExtraTopic) and self.describe() == other.describe()
+
+    def __hash__(self) -> int:
+        return hash(self.describe())
+
+    def __repr__(self) -> str:
+        return f"ExtraTopic({self.describe()!r})"
+
+    def describe(self) -> str:
+        """The entry in TOPICS_EXTRA's text form."""
+        text = f"{self.name} rate_hz={self.rate_hz:g} mode={self.mode}"
+        if self.type_name:
+            text += f" type={self.type_name}"
+        return text + (f" deadband={self.deadband:g}" if self.deadband else "")

@@ -135,8 +135,10 @@ def delete_accepted(
     dead_letters: Sequence[DeadLetterRow],
     now: float,
     codecs: Codecs,
+    counter: str = "acked_total",
 ) -> None:
-    """Delete a batch PhyCloud has, keeping ``dead_letters`` aside first."""
+    """Delete a batch PhyCloud has, keeping ``dead_letters`` aside first; the deleted
+    events count in ``counter`` (``exported_total`` for a hand-carry export)."""
     rejected = 0  # those this ack deletes: after a lease ran out, another may have them
     deleting = _ids_deleted_by(cursor, batch, codecs) if dead_letters else set()
     for dead in dead_letters:
@@ -163,7 +165,7 @@ def delete_accepted(
     leases.give_back(cursor, batch.owner)
     bump_counters(
         cursor,
-        acked_total=max(0, deleted - rejected),
+        **{counter: max(0, deleted - rejected)},
         dead_letters=rejected,
         **{"drop:rejected": rejected},
     )

@@ -99,6 +99,11 @@ class QueueStats:
         return self.counters.get("acked_total", 0)
 
     @property
+    def exported_total(self) -> int:
+        """Events that left in verified hand-carry files (``export``)."""
+        return self.counters.get("exported_total", 0)
+
+    @property
     def dead_letters(self) -> int:
         return self.counters.get("dead_letters", 0)
 

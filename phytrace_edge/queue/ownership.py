@@ -30,6 +30,8 @@ class ServiceLock:
     def __init__(self, queue_path: Path) -> None:
         self.path = Path(f"{queue_path}.lock")
         try:
+            # the queue's folder, as the store would make it (0700: the events are private)
+            self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
             self._fd: int | None = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
         except OSError as exc:
             raise QueueError(

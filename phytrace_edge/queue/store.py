@@ -13,10 +13,9 @@ only makes the bridge send a batch again, which PhyCloud deduplicates, and the n
 put's fsync makes them durable anyway (docs/queue.md, "What survives what"). Events
 that wait (an outage) are packed into frames by the writer (``frames``).
 
-Every event that leaves the queue other than by ``ack`` is counted by reason:
-``thinned``, ``cap_bytes``, ``cap_events`` (caps), ``ttl`` (expired), ``disk_full``
-(SQLITE_FULL), ``rejected`` (dead-lettered). Thread-safe: every use of the connection holds the
-database's lock, and each thread has its own compressors.
+Every event that leaves other than by ``ack`` is counted by reason: ``thinned``,
+``cap_bytes``, ``cap_events``, ``ttl``, ``disk_full``, ``rejected`` (dead-lettered).
+Thread-safe: each use of the connection holds its lock; each thread has its compressors.
 """
 
 from __future__ import annotations
@@ -297,14 +296,17 @@ class QueueStore:
         events = decode_rows(self.codecs, rows)  # outside the lock: others go on
         return Batch(tuple(ranges), token, events)
 
-    def ack(self, batch: Batch, dead_letters: Sequence[DeadLetter] = ()) -> None:
-        """PhyCloud has the batch: delete it, moving ``dead_letters`` aside first."""
-        now = self._clock()
+    def ack(
+        self, batch: Batch, dead_letters: Sequence[DeadLetter] = (), exported: bool = False
+    ) -> None:
+        """PhyCloud has the batch (or, ``exported``, a verified hand-carry file has it):
+        delete it, moving ``dead_letters`` aside first."""
+        now, counter = self._clock(), "exported_total" if exported else "acked_total"
         by_id = {event.id: event for event in batch.events} if dead_letters else {}
         rows = [dead_letter_row(self.codecs, by_id[d.queue_id], d) for d in dead_letters]
         self._db.write(
-            lambda cursor: claims.delete_accepted(cursor, batch, rows, now, self.codecs),
-            durable=False,
+            lambda cursor: claims.delete_accepted(cursor, batch, rows, now, self.codecs, counter),
+            durable=exported,  # an export deletes what only a file on a stick now holds
         )
 
     def take_back_orphaned_leases(self) -> int:
@@ -354,8 +356,7 @@ class QueueStore:
 
     def maintain(self) -> None:
         """Periodic upkeep: TTL expiry, space reclaim, the integrity check the open did
-        not finish (then daily), and the full-disk reserve made again once the disk
-        has room."""
+        not finish (then daily), and the full-disk reserve again once the disk has room."""
         self.expire()
         self.reclaim_space()
         if time.monotonic() >= self.next_check_at:

@@ -2,9 +2,10 @@
 and a clean stop.
 
 Threads (each a supervised worker): ``ingest`` (the source's loop), ``sampler`` (the
-sample tick, for live inputs), ``writer``, ``sender``, ``heartbeat`` and
-``maintenance``. They share only the queue file and the writer's hand-off, so a
-stalled PhyCloud never slows ingest and a burst of messages never blocks a send.
+sample tick, for live inputs), ``writer``, ``sender``, ``heartbeat`` (which also
+emits the ``bridge.health`` events) and ``maintenance``. They share only the queue
+file and the writer's hand-off, so a stalled PhyCloud never slows ingest and a burst
+of messages never blocks a send.
 ``runtime/wiring.py`` builds the parts; this module runs them.
 """
 
@@ -24,6 +25,8 @@ from phytrace_edge.errors import QueueError
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Feed, Finished, Source
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime.health import Thresholds, report
+from phytrace_edge.runtime.health_events import HealthSchedule, health_event
 from phytrace_edge.runtime.heartbeat import (
     HEARTBEAT_S,
     Figures,
@@ -56,6 +59,8 @@ class ServiceOptions:
     stall_after_s: float = 30.0  # a worker without progress this long is stuck
     metrics_host: str = "127.0.0.1"
     metrics_port: int = 0
+    health_event_interval_s: float = 0.0  # 0: no bridge.health events
+    thresholds: Thresholds | None = None  # what the health events judge by
 
 
 class BridgeService:
@@ -76,7 +81,7 @@ class BridgeService:
         self.sender = sender
         self.source = source
         self.builder = builder
-        self.dispatcher = Dispatcher(builder.add_reading)
+        self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
         self.writer = QueueWriter(store)
         self.sampler = Sampler(
             builder, self._emit, options.sample_rate_hz, before_tick=source.before_tick
@@ -84,6 +89,8 @@ class BridgeService:
         self.supervisor = supervisor or Supervisor()
         self.finished = threading.Event()  # a finite input (a bag) was read to its end
         self.events_built = 0
+        self._emit_lock = threading.Lock()  # the sampler and the heartbeat both emit
+        self._health = HealthSchedule(options.health_event_interval_s)
         self.store_depth_at_stop = 0
         self.started_at = time.time()
         self._on_event = on_event
@@ -96,7 +103,8 @@ class BridgeService:
         self._on_stopped.append(callback)
 
     def _emit(self, built: Built) -> None:
-        self.events_built += 1
+        with self._emit_lock:
+            self.events_built += 1
         check_event(built.event, log)  # a violation is logged; the event is still kept
         if self._on_event is not None:
             self._on_event(built.event)
@@ -163,9 +171,23 @@ class BridgeService:
         while not stop.wait(HEARTBEAT_S):
             try:
                 self.heartbeat(running=True)
+                self.emit_health_event()
             except QueueError as exc:  # busy or full for now: the next beat tries again
                 log.warning("heartbeat not written: %s", exc)
             beat()
+
+    def emit_health_event(self, trigger: str | None = None) -> None:
+        """A ``bridge.health`` event when one is due (or ``trigger`` forces one)."""
+        thresholds = self.options.thresholds
+        if thresholds is None or not self.options.health_event_interval_s:
+            return
+        now = time.time()
+        document = report(self.store.stats(), thresholds, now)
+        trigger = self._health.trigger(document["healthy"], now) if trigger is None else trigger
+        if trigger is not None:
+            identity = self.builder.identity
+            event = health_event(identity, document, trigger, now - self.started_at, now)
+            self._emit(Built(event, important=trigger != "interval"))
 
     def _maintenance_loop(self, beat: Beat) -> None:
         stop = self.supervisor.workers["maintenance"].stop
@@ -195,11 +217,14 @@ class BridgeService:
     # ------------------------------------------------------------------ figures
 
     def topics(self, rates: dict[str, float]) -> dict[str, dict[str, Any]]:
+        known = self.source.topic_stats()
+        for topic, counts in self.builder.side_counts().items():
+            known[topic] = {**known.get(topic, {}), **counts}
         return topic_report(
             self.dispatcher.received,
             self.dispatcher.rejected,
             self.builder.topic_ages(),
-            self.source.topic_stats(),
+            known,
             rates,
         )
 
@@ -249,12 +274,18 @@ class BridgeService:
         self.store.write_service_state(document, running)
 
     def shutdown(self, grace_s: float) -> None:
-        """Stop in order: ingest, then queue what was built, then let the sender flush
-        for up to ``grace_s``, then the rest."""
+        """Stop in order: ingest, then queue what was built (and a last health event),
+        then let the sender flush for up to ``grace_s``, then the rest."""
         sup = self.supervisor
         sup.stop("sampler", STOP_TIMEOUT_S)
         sup.stop("ingest", STOP_TIMEOUT_S)
         self.source.stop()
+        self.sampler.flush_side_events()
+        sup.stop("heartbeat", STOP_TIMEOUT_S)  # it emits health events: none after the writer
+        try:
+            self.emit_health_event("stop")
+        except QueueError as exc:
+            log.warning("no stop health event: %s", exc)
         self.writer.request_stop()
         sup.stop("writer", 2 * STOP_TIMEOUT_S)
         self.sender.flushing.set()
@@ -263,7 +294,7 @@ class BridgeService:
         while time.monotonic() < deadline and self.store.counter("depth") > 0:
             if sender.done.wait(0.05):
                 break
-        for name in ("sender", "heartbeat", "maintenance"):
+        for name in ("sender", "maintenance"):
             sup.stop(name, STOP_TIMEOUT_S)
         if self._metrics is not None:
             self._metrics.shutdown()

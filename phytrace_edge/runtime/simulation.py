@@ -69,14 +69,18 @@ def run_simulation(
     )
     source = SimSource(options)
     builder_options = wiring.builder_options(settings)
-    builder = UDMBuilder(builder_options, clock=source.clock)
+    builder = UDMBuilder(builder_options, source.clock, source.field_types)
     sampler = Sampler(builder, emit, builder_options.sample_rate_hz)
     started = time.monotonic()
     stop = threading.Event()
     ticker = threading.Thread(target=sampler.run, args=(stop,), name="sampler", daemon=True)
     try:
         source.start(
-            Feed(Dispatcher(builder.add_reading).on_message, sampler.tick, sampler.period_s)
+            Feed(
+                Dispatcher(builder.add_reading, builder.add_message).on_message,
+                sampler.tick,
+                sampler.period_s,
+            )
         )
         if not source.keeps_time:
             ticker.start()

@@ -54,7 +54,16 @@ def identity(s: Settings) -> Identity:
 def builder_options(s: Settings) -> BuilderOptions:
     from phytrace_edge.builder.options import BuilderOptions
 
-    return BuilderOptions(identity(s), s.sample_rate_hz, s.stale_after_s, s.use_sim_time)
+    return BuilderOptions(
+        identity(s),
+        s.sample_rate_hz,
+        s.stale_after_s,
+        s.use_sim_time,
+        extra_topics=s.topics_extra,
+        extra_max_array=s.extra_max_array,
+        rosout_min_level=s.rosout_min_level,
+        rosout_burst=s.rosout_burst,
+    )
 
 
 def source_options(
@@ -72,6 +81,9 @@ def source_options(
     return SourceOptions(
         kind=kind,
         topics=s.topics,
+        extra_topics={
+            extra.name: (s.extra_topics[extra.name], extra.type_name) for extra in s.topics_extra
+        },
         qos_overrides=s.topic_qos or {},
         bag_path=bag_path,
         replay_rate=s.replay_rate,
@@ -153,6 +165,11 @@ def service_options(s: Settings) -> ServiceOptions:
         stall_after_s=max(MIN_STALL_S, 3 * s.http_timeout_s),
         metrics_host=s.metrics_host,
         metrics_port=s.metrics_port,
+        # a bag replay is history, not a running robot: no health events of its own
+        health_event_interval_s=0.0
+        if s.bridge_input.startswith("bag:")
+        else (s.health_event_interval_s),
+        thresholds=health_thresholds(s),
     )
 
 
@@ -183,7 +200,7 @@ def build_service(
         raise
     try:
         sender = Sender(store, transport or http_transport(s), send_policy(s))
-        builder = UDMBuilder(builder_options(s), clock=source.clock)
+        builder = UDMBuilder(builder_options(s), source.clock, source.field_types)
         service = BridgeService(service_options(s), store, sender, source, builder, on_event)
     except BaseException:
         store.close()

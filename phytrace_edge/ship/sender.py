@@ -361,6 +361,7 @@ class Sender:
         self.stats.update(
             add_retries=1,
             last_error=str(exc),
+            last_error_class=SendStats.error_class(exc, status),
             last_error_at=self._clock(),
             last_status=status,
             add_unexpected_answers=int(isinstance(exc, UnexpectedAnswerError)),

@@ -25,6 +25,7 @@ class SendStats:
     unexpected_answers: int = 0
     last_success_at: float | None = None
     last_error: str | None = None
+    last_error_class: str | None = None  # "HTTP 503", "ConnectError": no details, no key
     last_error_at: float | None = None
     last_status: int | None = None
     live_events_sent: int = 0  # the live lane's: the newest first, after an outage
@@ -65,6 +66,16 @@ class SendStats:
             for i, bound in enumerate(LATENCY_BUCKETS_S):
                 if seconds <= bound:
                     self.latency_buckets[i] += 1
+
+    @staticmethod
+    def error_class(exc: BaseException | None, status: int | None) -> str | None:
+        """What kind of failure ``exc`` is, in a word: the HTTP status PhyCloud
+        answered, or the class of the network error under it."""
+        if exc is None:
+            return None
+        if status is not None:
+            return f"HTTP {status}"
+        return type(exc.__cause__ or exc).__name__
 
     def as_dict(self) -> dict[str, Any]:
         with self.lock:

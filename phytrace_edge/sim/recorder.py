@@ -51,7 +51,7 @@ def _rosbags_value(value: Any, typestore: Any) -> Any:
     if isinstance(value, bytes):
         return value[0]
     if isinstance(value, array.array):
-        return np.array(value, dtype=np.float32 if value.typecode == "f" else np.float64)
+        return np.array(value, dtype=np.dtype(value.typecode))  # 'f' float32, 'B' uint8, ...
     if isinstance(value, list):
         return [_rosbags_value(item, typestore) for item in value]
     return value

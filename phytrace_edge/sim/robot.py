@@ -26,6 +26,7 @@ from phytrace_edge.sim.world import ORIGIN_ALT, World
 SCAN_BEAMS = 360
 SCAN_RANGE_MIN_M = 0.12
 SCAN_RANGE_MAX_M = 12.0
+LOG_INFO, LOG_WARN, LOG_ERROR = 20, 30, 40  # rcl_interfaces/msg/Log's levels
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 LATCHED = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -56,7 +57,14 @@ class DeliveryRobot:
             "/diagnostics": node.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE),
             "/goal_pose": node.create_publisher(m.PoseStamped, "/goal_pose", LATCHED),
             "/delivery/status": node.create_publisher(m.String, "/delivery/status", LATCHED),
+            # beyond the table: the robot's log, and a topic for TOPICS_EXTRA
+            "/rosout": node.create_publisher(m.Log, "/rosout", LATCHED),
+            "/motor/temperature": node.create_publisher(
+                m.Temperature, "/motor/temperature", RELIABLE
+            ),
         }
+        self._logged_faults: set[str] = set()
+        self._battery_warned = False
 
     def tick(self) -> None:
         """Advance the world one step and publish what is due."""
@@ -69,6 +77,8 @@ class DeliveryRobot:
         if per_second:
             self.pub["/battery_state"].publish(self.battery_state())
             self.pub["/diagnostics"].publish(self.diagnostics())
+            self.pub["/motor/temperature"].publish(self.motor_temperature())
+        self.publish_logs()
         if self.world.goal is not None and self.world.goal_serial != self._last_goal_serial:
             self._last_goal_serial = self.world.goal_serial
             self.pub["/goal_pose"].publish(self.goal_pose())
@@ -196,6 +206,49 @@ class DeliveryRobot:
                     )
                 )
         return m.DiagnosticArray(header=self._header(""), status=statuses)
+
+    def motor_temperature(self) -> Any:
+        """The left drive motor warms with speed."""
+        celsius = round(35.0 + 12.0 * abs(self.world.v), 1)
+        return m.Temperature(header=self._header("left_motor"), temperature=celsius, variance=0.25)
+
+    def publish_logs(self) -> None:
+        """What the robot's nodes log: an ERROR or WARN when a fault appears, a WARN
+        when the battery runs low, an INFO at each task state change."""
+        w = self.world
+        for fault in w.faults:
+            if fault.name not in self._logged_faults:
+                level = LOG_ERROR if fault.level >= 2 else LOG_WARN
+                self._log(
+                    level, f"delivery_robot.{fault.name}", f"{fault.hardware_id}: {fault.message}"
+                )
+        self._logged_faults = {fault.name for fault in w.faults}
+        if w.soc_pct < 20 and not self._battery_warned:
+            self._log(
+                LOG_WARN,
+                "delivery_robot.battery",
+                f"battery low ({w.soc_pct:.0f} %), docking after this task",
+            )
+        self._battery_warned = w.soc_pct < 20
+        if w.state != self._last_state:
+            self._log(
+                LOG_INFO,
+                "delivery_robot.mission",
+                f"task state {self._last_state or 'start'} -> {w.state}",
+            )
+
+    def _log(self, level: int, logger: str, text: str) -> None:
+        self.pub["/rosout"].publish(
+            m.Log(
+                stamp=self.node.get_clock().now().to_msg(),
+                level=level,
+                name=logger,
+                msg=text,
+                file="robot.py",
+                function="publish_logs",
+                line=1,
+            )
+        )
 
     def goal_pose(self) -> Any:
         _, x, y = self.world.goal  # type: ignore[misc]

@@ -20,7 +20,7 @@ from typing import Any
 
 import fastjsonschema
 
-SCHEMA_VERSION = "1.0.0"
+SCHEMA_VERSION = "1.1.0"
 SCHEMA_FILE = f"udm-{SCHEMA_VERSION}.schema.json"
 
 log = logging.getLogger(__name__)

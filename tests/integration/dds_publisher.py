@@ -1,5 +1,7 @@
 """A plain Cyclone DDS robot for the DDS source's test (run as a script): publishes the
-ten topics with known values, ROS 2 wire names and types, until stdin closes.
+ten topics with known values, ROS 2 wire names and types, until stdin closes; and, for
+TOPICS_EXTRA, the known messages of the generic conversion's test (``EXTRA``) and a
+log record on /rosout.
 
     dds_publisher.py     (ROS_DOMAIN_ID and ROS_LOCALHOST_ONLY come from the environment)
 """
@@ -127,12 +129,38 @@ def samples() -> dict[str, tuple[object, Qos]]:
     }
 
 
+def extra_samples() -> dict[str, tuple[object, Qos]]:
+    """Messages of types outside the table, in the types the dds input makes itself."""
+    from tests.unit.test_generic import (
+        compressed_image,
+        float32_array,
+        temperature,
+        tf_message,
+        to_idl,
+    )
+
+    log = t.Log_(
+        stamp=t.Time_(sec=1_763_000_000), level=40, name="acme.drive", msg="overcurrent", line=7
+    )
+    return {
+        EXTRA["/motor/temperature"]: (to_idl(temperature()), RELIABLE),
+        EXTRA["/tf"]: (to_idl(tf_message()), BEST_EFFORT),
+        EXTRA["/cells"]: (to_idl(float32_array()), BEST_EFFORT),
+        EXTRA["/camera"]: (to_idl(compressed_image()), BEST_EFFORT),
+        "/rosout": (log, RELIABLE),
+    }
+
+
+# extra topic -> its name on the wire (here, the same)
+EXTRA = {t: t for t in ("/motor/temperature", "/tf", "/cells", "/camera")}
+
+
 def main() -> None:
     domain_id, localhost = domain_settings(os.environ)
     domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
     participant = DomainParticipant(domain_id)
     writers = []
-    for topic_name, (sample, qos) in samples().items():
+    for topic_name, (sample, qos) in (samples() | extra_samples()).items():
         topic = Topic(participant, dds_topic_name(topic_name), type(sample))
         writers.append((DataWriter(participant, topic, qos=qos), sample))
     print("ready", flush=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -48,7 +49,7 @@ def replay_events(path: Path, rate: float = 0) -> tuple[list[dict], object]:
         dispatcher.on_message, lambda at: events.append(builder.build_event(captured_at_s=at)), 0.2
     )
     summary = replay(
-        str(path), {t: t for t in KNOWN_TOPICS}, feed, clock, rate=rate, stop=threading.Event()
+        str(path), {t: t for t in KNOWN_TOPICS}, {}, feed, clock, rate=rate, stop=threading.Event()
     )
     return events, summary
 
@@ -72,11 +73,13 @@ def test_replay_gives_the_recorded_values_on_the_bag_timeline(bag: Path) -> None
     events, summary = replay_events(bag)
     live: list[dict] = []
     run_simulation(SECONDS * 10, sink=live.append, seed=0)
+    live = [e for e in live if e["event_type"] == "telemetry.periodic"]
 
     assert summary.error is None
     assert sum(summary.messages.values()) > 500
-    assert summary.skipped == {
-        f"{CUSTOM_TOPIC} (acme_msgs/msg/Widget)": summary.messages["/battery_state"]
+    assert summary.skipped == {  # not configured: TOPICS_EXTRA is empty
+        f"{CUSTOM_TOPIC} (acme_msgs/msg/Widget)": summary.messages["/battery_state"],
+        "/motor/temperature (sensor_msgs/msg/Temperature)": summary.messages["/battery_state"],
     }  # the recorder writes one widget per battery message
     assert all(find_violation(event) is None for event in events)
     # the same seeded robot, live and replayed, gives the same values at every tick
@@ -139,7 +142,12 @@ def test_a_missing_bag_is_a_one_line_error(tmp_path: Path) -> None:
 
 def test_run_replays_a_bag_into_phycloud(bag: Path, tmp_path: Path, stub) -> None:
     env = python_env(
-        PHYCLOUD_ENDPOINT=stub.endpoint, QUEUE_PATH=str(tmp_path / "q.db"), FLUSH_INTERVAL_S="0.2"
+        PHYCLOUD_ENDPOINT=stub.endpoint,
+        QUEUE_PATH=str(tmp_path / "q.db"),
+        FLUSH_INTERVAL_S="0.2",
+        # a type defined only in the bag, at most every 2 s of bag time; the robot's log
+        TOPICS_EXTRA=f"{CUSTOM_TOPIC} rate_hz=0.5",
+        ROSOUT_MIN_LEVEL="info",
     )
     result = subprocess.run(
         [
@@ -160,4 +168,18 @@ def test_run_replays_a_bag_into_phycloud(bag: Path, tmp_path: Path, stub) -> Non
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.startswith(f"replayed {bag}: ")
     built = int(result.stdout.split("; ")[1].split()[0])
-    assert stub.stats()["unique"] == built == SECONDS * 5 - 1
+    events = stub.events()
+    by_type = Counter(event["event_type"] for event in events)
+    assert by_type["telemetry.periodic"] == built == SECONDS * 5 - 1
+    widgets = [event for event in events if event["event_type"] == "telemetry.topic"]
+    assert len(widgets) == SECONDS // 2  # one message a second, sent at most every 2 s
+    assert {(w["topic"], w["type"]) for w in widgets} == {(CUSTOM_TOPIC, "acme_msgs/msg/Widget")}
+    assert all(w["data"] == {"name": "w", "level": 1.0} for w in widgets)
+    logs = [event for event in events if event["event_type"] == "log.record"]
+    assert any(log["logger"] == "delivery_robot.mission" for log in logs), logs
+    assert "bridge.health" not in by_type  # a replay is history: no health of its own
+    first_tick, last_tick = (
+        min(e["captured_at"] for e in events),
+        max(e["captured_at"] for e in events),
+    )
+    assert all(first_tick <= w["captured_at"] <= last_tick for w in widgets)  # bag time

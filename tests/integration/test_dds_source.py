@@ -29,6 +29,7 @@ from phytrace_edge.ingest.sources.dds import DdsSource, domain_settings
 from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
+from tests.unit.test_generic import KNOWN
 
 PUBLISHER = str(Path(__file__).with_name("dds_publisher.py"))
 
@@ -90,6 +91,11 @@ def test_ros_environment_picks_the_domain_and_loopback() -> None:
         domain_settings({"ROS_DOMAIN_ID": "seven"})
 
 
+def topic_events(events: list[dict]) -> dict[str, dict]:
+    """The latest telemetry.topic event of each topic."""
+    return {e["topic"]: e for e in events if e["event_type"] == "telemetry.topic"}
+
+
 def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> None:
     domain = str(random.Random(os.getpid()).randint(100, 200))  # private to this test
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)
@@ -106,10 +112,19 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
     stop = threading.Event()
     try:
         assert publisher.stdout.readline().strip() == "ready"
-        settings = load_settings(env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds"}).settings
+        extras = (
+            "/motor/temperature type=sensor_msgs/msg/Temperature rate_hz=50; "
+            "/tf type=tf2_msgs/msg/TFMessage rate_hz=50; "
+            "/cells type=std_msgs/msg/Float32MultiArray rate_hz=50; "
+            "/camera type=sensor_msgs/msg/CompressedImage rate_hz=50; "
+            "/no/type; /vendor type=acme_msgs/msg/Unknown"
+        )
+        settings = load_settings(
+            env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds", "TOPICS_EXTRA": extras}
+        ).settings
         source = DdsSource(wiring.source_options(settings, os.environ))
-        builder = UDMBuilder(wiring.builder_options(settings))
-        dispatcher = Dispatcher(builder.add_reading)
+        builder = UDMBuilder(wiring.builder_options(settings), field_types=source.field_types)
+        dispatcher = Dispatcher(builder.add_reading, builder.add_message)
         sampler = Sampler(
             builder, lambda built: events.append(built.event), 10, before_tick=source.before_tick
         )
@@ -121,6 +136,15 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
             60,
             "an event with every domain",
         )
+        wait_for(
+            lambda: (
+                {"/motor/temperature", "/tf", "/cells", "/camera"} <= topic_events(events).keys()
+                and any(e["event_type"] == "log.record" for e in events)
+            ),
+            60,
+            "the extra topics and the log record",
+        )
+        stats = source.topic_stats()
     finally:
         stop.set()
         if source is not None:
@@ -154,3 +178,19 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
     assert event["location"]["sources"][0]["stamp"] == "2025-11-13T02:13:20.500Z"
     received = dispatcher.received
     assert received["/odom"] > 0 and received["/battery_state"] > 0  # best effort and reliable
+    # TOPICS_EXTRA through Cyclone DDS: the same JSON as rclpy and rosbags give
+    by_topic = topic_events(events)
+    for make, expected in KNOWN:
+        name = make()._type
+        topic = next(t for t, e in by_topic.items() if e["type"] == name)
+        assert by_topic[topic]["data"] == expected, topic
+        assert find_violation(by_topic[topic]) is None
+    assert "dds input needs its type" in stats["/no/type"]["skipped"]
+    assert "acme_msgs/msg/Unknown" in stats["/vendor"]["skipped"]
+    log = next(e for e in events if e["event_type"] == "log.record")
+    assert (log["level"], log["logger"], log["message"], log["line"]) == (
+        "error",
+        "acme.drive",
+        "overcurrent",
+        7,
+    )

@@ -13,7 +13,12 @@ from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings
 from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.sources.ros_graph import GRAPH_CHECK_S, NodeClock, subscribe_topics
+from phytrace_edge.ingest.sources.ros_graph import (
+    GRAPH_CHECK_S,
+    NodeClock,
+    subscribe_topics,
+    wanted_topics,
+)
 from phytrace_edge.ingest.sources.sim import mock_api
 from phytrace_edge.runtime import wiring
 from phytrace_edge.sim import mock_ros
@@ -39,12 +44,12 @@ class Graph:
         settings = load_settings(env=env).settings
         options = wiring.source_options(settings, {})
         builder = UDMBuilder(wiring.builder_options(settings), clock=NodeClock(self.api))
-        self.dispatcher = Dispatcher(builder.add_reading)
+        self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
         node = self.api.create_node("phytrace_edge")
         self.subscriber = subscribe_topics(
             self.api,
             node,
-            dict(options.topics),
+            wanted_topics(dict(options.topics), dict(options.extra_topics)),
             self.dispatcher.on_message,
             dict(options.qos_overrides),
         )
@@ -208,3 +213,27 @@ def test_ros_parameters_are_a_settings_source(
     rows = {line.split()[0]: line.split()[1:] for line in capsys.readouterr().out.splitlines()}
     assert rows["SAMPLE_RATE_HZ"] == ["10.0", "ros", "param"]
     assert rows["SOURCE_ID"] == ["from-env", "env", "SOURCE_ID"]  # env outranks a ROS param
+
+
+def test_extra_topics_take_their_type_from_the_graph(graph) -> None:
+    from phytrace_edge.sim.mock_ros.message_base import MESSAGE_TYPES, declare
+
+    g = graph(
+        TOPICS_EXTRA="/motor/temperature rate_hz=100; /acme/drive mode=on_change",
+        TOPIC_NAMESPACE="/robot1",
+    )
+    sensor = g.robot.create_publisher(m.Temperature, "/robot1/motor/temperature", RELIABLE)
+    vendor = declare("acme_msgs/msg/DriveStatus", {"amps": "float"})
+    g.robot.create_publisher(vendor, "/robot1/acme/drive", RELIABLE)
+    del MESSAGE_TYPES["acme_msgs/msg/DriveStatus"]  # in the graph, not installed here
+    g.run(GRAPH_CHECK_S + 0.1)
+    assert g.subscription("/motor/temperature")[2] == "sensor_msgs/msg/Temperature"
+    assert g.subscription("/acme/drive") is None
+    stats = g.subscriber.stats()
+    assert stats["/acme/drive"]["type_unknown"] == "acme_msgs/msg/DriveStatus"
+    for celsius in (40.0, 41.5):
+        sensor.publish(m.Temperature(temperature=celsius))
+        g.run(0.3)
+    topic_events = [e for e in g.events if e["event_type"] == "telemetry.topic"]
+    assert [e["data"]["temperature"] for e in topic_events] == [40.0, 41.5]
+    assert {e["topic"] for e in topic_events} == {"/motor/temperature"}  # the configured name

@@ -16,6 +16,8 @@ import orjson
 import pytest
 
 from phytrace_edge import run_simulation
+from phytrace_edge.builder.envelope import envelope
+from phytrace_edge.config import load_settings
 from phytrace_edge.udm.event import new_event_id
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -83,7 +85,20 @@ def png_pixels(path: Path) -> list[tuple[int, int, int]]:
 
 def test_live_page_shows_each_robot(tmp_path: Path, stub) -> None:
     events: list[dict] = []
-    run_simulation(300, sink=events.append)
+    settings = load_settings(
+        env={"TOPICS_EXTRA": "/motor/temperature mode=on_change", "ROSOUT_MIN_LEVEL": "info"}
+    ).settings
+    run_simulation(300, settings=settings, sink=events.append)
+    health = {  # a bridge.health event, as the service emits them
+        **envelope(events[-1]["identity"], "bridge.health", 1_795_338_843.0),
+        "trigger": "change",
+        "healthy": False,
+        "problems": ["queue is 91% of QUEUE_MAX_BYTES"],
+        "version": "0.1.0",
+        "uptime_s": 4200.0,
+        "queue": {"depth": 73},
+    }
+    events.append(health)
     for robot in ("amr-7", "amr-8"):
         batch = [
             {
@@ -100,18 +115,31 @@ def test_live_page_shows_each_robot(tmp_path: Path, stub) -> None:
     dom = chromium(tmp_path, "--dump-dom", f"{stub.url}/").stdout
     assert 'data-source="amr-7"' in dom and 'data-source="amr-8"' in dom
     assert f"{2 * len(events)} events stored" in dom
-    soc = events[-1]["power"]["battery"]["state_of_charge_pct"]
+    periodic = [e for e in events if e["event_type"] == "telemetry.periodic"]
+    soc = periodic[-1]["power"]["battery"]["state_of_charge_pct"]
     assert f"{soc:.1f} %" in dom  # the latest battery value of the robot
     robots = httpx.get(f"{stub.endpoint}/robots").json()["robots"]
-    newest = max(e["captured_at"] for e in events)
+    newest = max(e["captured_at"] for e in periodic)
     lag = time.time() - datetime.fromisoformat(newest.replace("Z", "+00:00")).timestamp()
     assert all(abs(robot["lag_s"] - lag) < 30 for robot in robots), "lag from the newest event"
     assert "s behind now" in dom
+    # the route, the timeline, the bridge's health, the extra topics
+    robot = robots[0]
+    assert len(robot["track"]) > 100 and robot["track"][-1]["frame"] == "local"
+    kinds = {item["kind"] for item in robot["timeline"]}
+    assert {"task", "log"} <= kinds, robot["timeline"]
+    assert "task state" in dom and "-&gt;" in dom  # an INFO log line of the mission
+    assert "unhealthy: queue is 91% of QUEUE_MAX_BYTES" in dom and "queue 73" in dom
+    temperature = next(e for e in reversed(events) if e["event_type"] == "telemetry.topic")
+    assert 'data-topic="/motor/temperature"' in dom
+    assert f'"temperature":{temperature["data"]["temperature"]}' in dom
 
     shot = tmp_path / "page.png"
     chromium(tmp_path, f"--screenshot={shot}", f"{stub.url}/")
     pixels = png_pixels(shot)
     colours = set(pixels)
     green = sum(1 for r, g, b in pixels if g > 100 and r < 60 and b < 90)  # the battery line
+    violet = sum(1 for r, g, b in pixels if 100 < r < 140 and g < 80 and b > 200)  # the route
     assert len(colours) > 50, "the screenshot looks blank"
     assert green > 200, "no battery plot drawn"
+    assert violet > 200, "no route drawn"

@@ -11,6 +11,7 @@ import pytest
 
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings, setting_infos
+from phytrace_edge.config.parsers import KNOWN_TOPICS
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import GIB, MIB
@@ -140,7 +141,7 @@ def test_topic_remap_and_disable_shape_the_topic_set() -> None:
     assert s.topics["/odom"] == "/wheel/odom"
     assert s.topics["/scan"] == "/front/scan"
     assert "/gps/fix" not in s.topics
-    assert len(s.topics) == 9
+    assert len(s.topics) == len(KNOWN_TOPICS) - 1
 
 
 def test_state_dir_follows_systemd_then_container_then_xdg() -> None:
@@ -245,3 +246,58 @@ def test_config_piped_into_a_closed_reader_exits_quietly_every_time_on_a_busy_ma
         for burner in burners:
             burner.kill()
             burner.wait()
+
+
+def test_topics_extra_as_text_and_as_toml_tables() -> None:
+    from phytrace_edge.ingest.topics import ExtraTopic
+
+    text = load_settings(
+        env={
+            "TOPICS_EXTRA": "/acme/drive type=acme_msgs/msg/DriveStatus rate_hz=2 "
+            "mode=on_change deadband=0.5; /tf",
+            "TOPIC_NAMESPACE": "/robot1",
+        }
+    ).settings
+    table = load_settings(
+        config_file={
+            "topics_extra": {
+                "/acme/drive": {
+                    "type": "acme_msgs/msg/DriveStatus",
+                    "rate_hz": 2,
+                    "mode": "on_change",
+                    "deadband": 0.5,
+                },
+                "/tf": {},
+            },
+            "topic_namespace": "/robot1",
+        }
+    ).settings
+    expected = (
+        ExtraTopic("/acme/drive", "acme_msgs/msg/DriveStatus", 2.0, "on_change", 0.5),
+        ExtraTopic("/tf"),
+    )
+    assert text.topics_extra == table.topics_extra == expected
+    assert text.extra_topics == {"/acme/drive": "/robot1/acme/drive", "/tf": "/robot1/tf"}
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        "/odom",  # a table topic
+        "/x rate_hz=0",
+        "/x rate_hz=-1",
+        "/x rate_hz=nan",
+        "/x mode=sometimes",
+        "/x deadband=1",  # deadband without on_change
+        "/x type=Temperature",
+        "/x colour=red",
+        "/x rate_hz",
+        "/x; /x",
+        "not-a-topic",
+    ],
+)
+def test_topics_extra_rejects_bad_entries_in_one_line(raw: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        load_settings(env={"TOPICS_EXTRA": raw})
+    assert str(caught.value).startswith("TOPICS_EXTRA=")
+    assert "\n" not in str(caught.value)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.generic import rosbags_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
@@ -92,6 +93,7 @@ def open_reader(path: str) -> Any:
 def replay(
     path: str,
     topics: Mapping[str, str],
+    extras: Mapping[str, tuple[str, str]],
     feed: Feed,
     clock: BagClock,
     rate: float,
@@ -100,14 +102,16 @@ def replay(
 ) -> ReplaySummary:
     """Feed the bag's messages to ``feed.on_message`` and call ``feed.tick(bag_time_s)``
     every sample period of bag time; stops at the end of the bag, at ``stop``, or at
-    the first unreadable record (reported in the summary, never raised)."""
+    the first unreadable record (reported in the summary, never raised). ``extras``
+    (TOPICS_EXTRA: name -> (actual, type or "")) are read with the bag's own types."""
     summary = ReplaySummary(path)
     reader = open_reader(path)
     canonical = {actual: name for name, actual in topics.items()}
+    canonical.update({actual: name for name, (actual, _) in extras.items()})
     wanted = []
     for connection in reader.connections:
         name = canonical.get(connection.topic)
-        if name is not None and connection.msgtype in TOPIC_BY_NAME[name].type_names:
+        if name is not None and _reads(name, connection.msgtype, extras):
             wanted.append(connection)
         else:
             summary.skipped[f"{connection.topic} ({connection.msgtype})"] += connection.msgcount
@@ -173,6 +177,14 @@ def replay(
     return summary
 
 
+def _reads(name: str, msgtype: str, extras: Mapping[str, tuple[str, str]]) -> bool:
+    """Whether topic ``name`` is read when it carries ``msgtype``: an extra topic with
+    no type given is read whatever its type."""
+    if name in extras:
+        return extras[name][1] in ("", msgtype)
+    return msgtype in TOPIC_BY_NAME[name].type_names
+
+
 class BagSource:
     """A recorded bag through the handlers, on the bag's timeline; finite."""
 
@@ -180,7 +192,9 @@ class BagSource:
 
     def __init__(self, options: SourceOptions) -> None:
         self._options = options
-        open_reader(options.bag_path).close()  # a missing or unreadable bag fails at start
+        reader = open_reader(options.bag_path)  # a missing or unreadable bag fails at start
+        self._field_types = rosbags_field_types(reader.typestore.fielddefs)  # the bag's types
+        reader.close()
         self.clock = BagClock()
         self._feed: Feed | None = None
         self._summary: ReplaySummary | None = None
@@ -195,6 +209,7 @@ class BagSource:
         self._summary = replay(
             options.bag_path,
             options.topics,
+            options.extra_topics,
             self._feed,
             self.clock,
             options.replay_rate,
@@ -202,6 +217,9 @@ class BagSource:
             beat,
         )
         log.info("%s", self._summary.describe())
+
+    def field_types(self, msg: Any) -> Mapping[str, str]:
+        return self._field_types(msg)
 
     def before_tick(self) -> None:
         """The replay feeds every message itself: nothing to take at the tick."""

@@ -25,6 +25,8 @@ class SourceOptions:
 
     kind: str  # "sim", "ros", "dds" or "bag"
     topics: Mapping[str, str]  # canonical topic -> name subscribed on the robot
+    # TOPICS_EXTRA: name -> (name subscribed on the robot, type or "" for the graph's)
+    extra_topics: Mapping[str, tuple[str, str]] = field(default_factory=dict)
     qos_overrides: Mapping[str, QosChoice] = field(default_factory=dict)
     bag_path: str = ""
     replay_rate: float = DEFAULT_REPLAY_RATE
@@ -70,6 +72,10 @@ class Source(Protocol):
 
     keeps_time: bool
     clock: SourceClock | None
+
+    def field_types(self, msg: Any) -> Mapping[str, str]:
+        """The rosidl field types of one of this input's messages (``ingest.generic``)."""
+        ...
 
     def start(self, feed: Feed) -> None: ...
 

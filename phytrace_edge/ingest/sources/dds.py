@@ -14,6 +14,9 @@ only their latest value counts: their readers keep one sample, in Cyclone's C ca
 and ``take_latest`` deserialises it at the sample tick, so Python touches at most one
 message per topic per tick instead of every message (an IMU at 200 Hz). Topics where
 every message counts (diagnostics, goals, delivery status) are delivered as they come.
+The topics of ``TOPICS_EXTRA`` are read like state topics, with types made from ROS 2
+Jazzy's message definitions (``dds_dynamic.py``); one whose type is not given or not
+known is skipped, with the reason in the log and in ``status``.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.generic import FieldTypes, rosbags_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
@@ -66,6 +70,7 @@ class DdsReaders:
         on_message: Callable[[str, Any], None],
         domain_id: int,
         localhost_only: bool,
+        extras: Mapping[str, tuple[str, str]] | None = None,
     ) -> None:
         try:
             from cyclonedds.core import Listener, Policy, Qos
@@ -84,16 +89,27 @@ class DdsReaders:
         self._on_message = on_message
         self.readers: list[Any] = []
         self.latest_readers: list[tuple[str, Any]] = []
+        self.skipped: dict[str, str] = {}
+
+        def qos(depth: int) -> Any:
+            return Qos(
+                Policy.Reliability.BestEffort,
+                Policy.Durability.Volatile,
+                Policy.History.KeepLast(depth),
+            )
+
+        for name, (actual, type_name) in (extras or {}).items():
+            idl = self._extra_type(name, type_name)
+            if idl is not None:
+                topic = Topic(self.participant, dds_topic_name(actual), idl)
+                reader = DataReader(self.participant, topic, qos=qos(1))
+                self.latest_readers.append((name, reader))
+                self.readers.append(reader)
         for canonical, actual in topics.items():
             spec = TOPIC_BY_NAME[canonical]
             # one type per DDS topic name: /cmd_vel is read as Twist, not TwistStamped
             topic = Topic(self.participant, dds_topic_name(actual), DDS_TYPES[spec.type_name])
             depth = READER_DEPTH if spec.every_message else 1
-            qos = Qos(
-                Policy.Reliability.BestEffort,
-                Policy.Durability.Volatile,
-                Policy.History.KeepLast(depth),
-            )
             if spec.every_message:
 
                 def deliver(reader: Any, name: str = canonical) -> None:
@@ -101,10 +117,13 @@ class DdsReaders:
                         on_message(name, sample)
 
                 reader = DataReader(
-                    self.participant, topic, qos=qos, listener=Listener(on_data_available=deliver)
+                    self.participant,
+                    topic,
+                    qos=qos(depth),
+                    listener=Listener(on_data_available=deliver),
                 )
             else:
-                reader = DataReader(self.participant, topic, qos=qos)
+                reader = DataReader(self.participant, topic, qos=qos(depth))
                 self.latest_readers.append((canonical, reader))
             self.readers.append(reader)
         log.info(
@@ -113,6 +132,22 @@ class DdsReaders:
             " (localhost only)" if localhost_only else "",
             len(self.readers),
         )
+
+    def _extra_type(self, name: str, type_name: str) -> Any:
+        """The DDS type of an extra topic, or None (and why, in ``skipped``)."""
+        from phytrace_edge.ingest.sources.dds_dynamic import idl_type
+
+        try:
+            if not type_name:
+                raise LookupError("the dds input needs its type (type=pkg/msg/Name)")
+            return idl_type(type_name)
+        except KeyError:
+            reason = f"type {type_name} is not a ROS 2 Jazzy message the dds input knows"
+        except LookupError as exc:
+            reason = str(exc)
+        self.skipped[name] = reason
+        log.warning("TOPICS_EXTRA %s: skipped - %s", name, reason)
+        return None
 
     def take_latest(self) -> None:
         """Hand over the newest sample of each state topic, if one came since last time."""
@@ -135,6 +170,7 @@ class DdsSource:
     def __init__(self, options: SourceOptions) -> None:
         self._options = options
         self._readers: DdsReaders | None = None
+        self._field_types: FieldTypes | None = None
 
     def start(self, feed: Feed) -> None:
         self._readers = DdsReaders(
@@ -142,6 +178,7 @@ class DdsSource:
             feed.on_message,
             self._options.dds_domain_id,
             self._options.dds_localhost_only,
+            self._options.extra_topics,
         )
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
@@ -160,5 +197,13 @@ class DdsSource:
     def finished(self) -> Finished | None:
         return None
 
+    def field_types(self, msg: Any) -> Mapping[str, str]:
+        from phytrace_edge.ingest.sources.dds_dynamic import fielddefs
+
+        if self._field_types is None:
+            self._field_types = rosbags_field_types(fielddefs())
+        return self._field_types(msg)
+
     def topic_stats(self) -> dict[str, dict[str, Any]]:
-        return {}
+        skipped = self._readers.skipped if self._readers else {}
+        return {name: {"skipped": reason} for name, reason in skipped.items()}

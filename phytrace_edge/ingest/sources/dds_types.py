@@ -1,4 +1,4 @@
-"""The ten topics' message types in ROS 2's DDS wire form, for Cyclone DDS.
+"""The table's message types in ROS 2's DDS wire form, for Cyclone DDS.
 
 ROS 2 maps ``pkg/msg/Type`` to the DDS type ``pkg::msg::dds_::Type_`` and a topic
 ``/name`` to ``rt/name``; field types follow the ROS IDL exactly (float32 vs float64,
@@ -202,6 +202,17 @@ class DiagnosticArray_(IdlStruct, typename="diagnostic_msgs::msg::dds_::Diagnost
     status: sequence[DiagnosticStatus_] = field(default_factory=list)
 
 
+@dataclass
+class Log_(IdlStruct, typename="rcl_interfaces::msg::dds_::Log_"):
+    stamp: Time_ = field(default_factory=Time_)
+    level: uint8 = 0
+    name: str = ""
+    msg: str = ""
+    file: str = ""
+    function: str = ""
+    line: uint32 = 0
+
+
 # ROS type name -> IDL type, for every type a topic of the table can carry
 DDS_TYPES: dict[str, type[IdlStruct]] = {
     "nav_msgs/msg/Odometry": Odometry_,
@@ -215,4 +226,5 @@ DDS_TYPES: dict[str, type[IdlStruct]] = {
     "geometry_msgs/msg/PoseStamped": PoseStamped_,
     "sensor_msgs/msg/JointState": JointState_,
     "std_msgs/msg/String": String_,
+    "rcl_interfaces/msg/Log": Log_,
 }

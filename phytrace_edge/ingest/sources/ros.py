@@ -5,12 +5,18 @@ from __future__ import annotations
 
 import importlib
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
-from phytrace_edge.ingest.sources.ros_graph import RosApi, TopicSubscriber, subscribe_topics
+from phytrace_edge.ingest.sources.ros_graph import (
+    RosApi,
+    TopicSubscriber,
+    subscribe_topics,
+    wanted_topics,
+)
 
 SPIN_TIMEOUT_S = 0.1
 
@@ -70,7 +76,7 @@ class RosSource:
         self._subscriber = subscribe_topics(
             self._api,
             self._node,
-            dict(self._options.topics),
+            wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
             feed.on_message,
             dict(self._options.qos_overrides),
         )
@@ -81,6 +87,9 @@ class RosSource:
         while not stop.is_set():
             self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
             beat()
+
+    def field_types(self, msg: Any) -> Mapping[str, str]:
+        return rosidl_field_types(msg)
 
     def before_tick(self) -> None:
         """Messages arrive through callbacks: nothing to take at the tick."""

@@ -49,20 +49,51 @@ class NodeClock:
         return float(self._system.now().nanoseconds) / 1e9
 
 
+@dataclass(frozen=True)
+class Wanted:
+    """A topic to subscribe: its name on the robot, the types accepted (empty: any, as
+    the graph says) and the subscription's queue depth."""
+
+    actual: str
+    types: tuple[str, ...]
+    depth: int
+
+
+def wanted_topics(
+    topics: dict[str, str], extras: dict[str, tuple[str, str]] | None = None
+) -> dict[str, Wanted]:
+    """The table's topics (canonical -> actual) and TOPICS_EXTRA's (name -> (actual,
+    type or ""))."""
+    wanted = {
+        canonical: Wanted(
+            actual,
+            TOPIC_BY_NAME[canonical].type_names,
+            EVERY_MESSAGE_QUEUE_DEPTH
+            if TOPIC_BY_NAME[canonical].every_message
+            else SAMPLED_QUEUE_DEPTH,
+        )
+        for canonical, actual in topics.items()
+    }
+    for name, (actual, type_name) in (extras or {}).items():
+        wanted[name] = Wanted(actual, (type_name,) if type_name else (), SAMPLED_QUEUE_DEPTH)
+    return wanted
+
+
 class TopicSubscriber:
     """One subscription per enabled topic, matched to what its publishers offer.
 
     ``refresh`` (at start and then periodically) subscribes topics whose publishers
     appeared since, and re-creates a subscription when a new publisher would be
     incompatible with it; topics with no publisher are skipped. A per-topic override
-    (TOPIC_QOS) replaces the matching. Incompatible-QoS events are counted per topic.
+    (TOPIC_QOS) replaces the matching. Incompatible-QoS events are counted per topic,
+    and so is a type this machine has no message class for (an extra topic's).
     """
 
     def __init__(
         self,
         api: RosApi,
         node: Any,
-        topics: dict[str, str],
+        topics: dict[str, Wanted],
         on_message: OnMessage,
         overrides: dict[str, QosChoice] | None = None,
     ) -> None:
@@ -72,17 +103,17 @@ class TopicSubscriber:
         self.subscribed: dict[str, tuple[Any, QosChoice, str]] = {}
         self.publishers: dict[str, int] = dict.fromkeys(topics, 0)
         self.qos_incompatible: Counter[str] = Counter()
+        self.type_unknown: dict[str, str] = {}
 
     def refresh(self) -> None:
-        for canonical, actual in self._topics.items():
-            spec = TOPIC_BY_NAME[canonical]
+        for canonical, wanted in self._topics.items():
             publishers = [
                 info
-                for info in self._node.get_publishers_info_by_topic(actual)
-                if info.topic_type in spec.type_names
+                for info in self._node.get_publishers_info_by_topic(wanted.actual)
+                if not wanted.types or info.topic_type in wanted.types
             ]
             self.publishers[canonical] = len(publishers)
-            if not publishers:
+            if not publishers or canonical in self.type_unknown:
                 continue
             choice = self._overrides.get(canonical) or matching_qos(
                 [
@@ -98,15 +129,27 @@ class TopicSubscriber:
             current = self.subscribed.get(canonical)
             if current is not None and current[1:] == (choice, type_name):
                 continue
+            try:
+                message_class = self._api.message_type(type_name)
+            except (ImportError, AttributeError, KeyError, ValueError):
+                self.type_unknown[canonical] = type_name
+                log.warning(
+                    "%s: type %s is not installed here - the topic is skipped", canonical, type_name
+                )
+                continue
             if current is not None:
                 self._node.destroy_subscription(current[0])
             self.subscribed[canonical] = (
-                self._subscribe(canonical, actual, type_name, choice),
+                self._subscribe(canonical, wanted, message_class, choice),
                 choice,
                 type_name,
             )
             log.info(
-                "%s: subscribed to %s (%s) as %s", canonical, actual, type_name, choice.describe()
+                "%s: subscribed to %s (%s) as %s",
+                canonical,
+                wanted.actual,
+                type_name,
+                choice.describe(),
             )
 
     def stats(self) -> dict[str, dict[str, Any]]:
@@ -119,19 +162,21 @@ class TopicSubscriber:
                 if canonical in self.subscribed
                 else None,
                 "qos_incompatible": self.qos_incompatible.get(canonical, 0),
+                **(
+                    {"type_unknown": self.type_unknown[canonical]}
+                    if canonical in self.type_unknown
+                    else {}
+                ),
             }
             for canonical in self._topics
         }
 
-    def _subscribe(self, canonical: str, actual: str, type_name: str, choice: QosChoice) -> Any:
+    def _subscribe(
+        self, canonical: str, wanted: Wanted, message_class: type, choice: QosChoice
+    ) -> Any:
         qos = self._api.qos
-        depth = (
-            EVERY_MESSAGE_QUEUE_DEPTH
-            if TOPIC_BY_NAME[canonical].every_message
-            else SAMPLED_QUEUE_DEPTH
-        )
         profile = qos.QoSProfile(
-            depth=depth,
+            depth=wanted.depth,
             reliability=qos.ReliabilityPolicy.RELIABLE
             if choice.reliable
             else qos.ReliabilityPolicy.BEST_EFFORT,
@@ -152,8 +197,8 @@ class TopicSubscriber:
             )
 
         return self._node.create_subscription(
-            self._api.message_type(type_name),
-            actual,
+            message_class,
+            wanted.actual,
             on_message,
             profile,
             event_callbacks=self._api.subscription_events(on_incompatible),
@@ -163,7 +208,7 @@ class TopicSubscriber:
 def subscribe_topics(
     api: RosApi,
     node: Any,
-    topics: dict[str, str],
+    topics: dict[str, Wanted],
     on_message: OnMessage,
     overrides: dict[str, QosChoice] | None = None,
 ) -> TopicSubscriber:

@@ -9,15 +9,17 @@ keeps time and ticks from a mock timer, so 100 robot cycles take a fraction of a
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
+from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
 from phytrace_edge.ingest.sources.ros_graph import (
     NodeClock,
     RosApi,
     TopicSubscriber,
     subscribe_topics,
+    wanted_topics,
 )
 from phytrace_edge.sim import mock_ros
 from phytrace_edge.sim.robot import DeliveryRobot
@@ -72,7 +74,7 @@ class SimSource:
         self._subscriber = subscribe_topics(
             api,
             node,
-            dict(self._options.topics),
+            wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
             feed.on_message,
             dict(self._options.qos_overrides),
         )
@@ -90,6 +92,9 @@ class SimSource:
                 return
             self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
             beat()
+
+    def field_types(self, msg: Any) -> Mapping[str, str]:
+        return rosidl_field_types(msg)
 
     def before_tick(self) -> None:
         """Messages arrive through callbacks: nothing to take at the tick."""

@@ -1,0 +1,103 @@
+"""``phytrace-edge import FILE...``: hand-carry files to PhyCloud, through the sender
+(batches, retries, idempotency keys): importing a file twice stores nothing twice."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from phytrace_edge.cli.common import checked, error
+from phytrace_edge.config.parsers import positive_float
+from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, QueueError
+from phytrace_edge.runtime import wiring
+
+TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from phytrace_edge.config import LoadedSettings
+    from phytrace_edge.queue.store import QueueStore
+    from phytrace_edge.ship.sender import Sender
+
+NAME = "import"
+HELP = (
+    "upload hand-carry files made by export to PhyCloud; exit 0 when every event of "
+    "every file was delivered"
+)
+IMPORT_LEASE_S = 600.0
+CHUNK_EVENTS = 20_000  # staged, then sent, at a time: the staging queue stays small
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help="files to upload")
+    parser.add_argument(
+        "--timeout",
+        type=checked(positive_float(10**7), "seconds"),
+        help="give up after this many seconds",
+    )
+
+
+def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
+    """Each file in turn: read it into a staging queue, then send that queue empty."""
+    import dataclasses
+    import signal
+    import tempfile
+    from pathlib import Path
+
+    from phytrace_edge.queue.options import QueueLimits
+    from phytrace_edge.queue.store import QueueStore
+    from phytrace_edge.ship.sender import Sender
+
+    settings = loaded.settings
+    deadline = None if args.timeout is None else time.monotonic() + args.timeout
+    # strictly oldest first: the staging queue only feeds the sender
+    policy = dataclasses.replace(wiring.send_policy(settings), live_share=0.0)
+    # a chunk at a time: never full, and events days old must not expire while staged
+    limits = QueueLimits(on_full="drop_newest", ttl_s=10 * 365 * 86400.0)
+    state_dir = Path(wiring.queue_path(settings)).parent
+    state_dir.mkdir(parents=True, exist_ok=True)
+    complete = True
+    with tempfile.TemporaryDirectory(prefix="import-", dir=state_dir) as staging:
+        path = Path(staging) / "queue.db"
+        with QueueStore.open(path, limits=limits, lease_s=IMPORT_LEASE_S) as store:
+            sender = Sender(store, wiring.http_transport(settings), policy)
+            signal.signal(signal.SIGINT, lambda signum, frame: sender.stop.set())
+            signal.signal(signal.SIGTERM, lambda signum, frame: sender.stop.set())
+            for file in args.files:
+                complete = _import_one(Path(file), store, sender, deadline) and complete
+                if sender.stop.is_set():
+                    break
+            sender.transport.close()
+    return EXIT_OK if complete else EXIT_UNHEALTHY
+
+
+def _import_one(path: Path, store: QueueStore, sender: Sender, deadline: float | None) -> bool:
+    """Read ``path`` into ``store`` and send it all; False when anything is missing."""
+    from tqdm import tqdm
+
+    from phytrace_edge.ship.export import export_chunks
+
+    if not path.is_file():
+        error(f"{path}: no such file")
+        return False
+    sent_before, read, delivered, damage = sender.stats.events_sent, 0, True, None
+    with tqdm(unit="ev", desc=f"importing {path.name}", file=sys.stderr, disable=None) as bar:
+        for chunk, found in export_chunks(path, CHUNK_EVENTS):
+            read, damage = read + len(chunk), found
+            if chunk and store.put_many(chunk).dropped:
+                raise QueueError(f"{store.path}: the staging queue is full (disk full?)")
+            delivered = sender.drain(deadline=deadline, progress=bar.update)
+            if not delivered:
+                break
+    sent = sender.stats.events_sent - sent_before
+    if damage is not None:
+        error(f"{damage}; the {read} event(s) before it were {'sent' if delivered else 'read'}")
+    if not delivered:
+        why = sender.stats.last_error or "stopped"
+        error(f"{path}: sent {sent} of {read} event(s) read ({why}); run import again")
+        sender.stop.set()  # the next files would fail alike
+        return False
+    if damage is None:
+        print(f"imported {path}: {sent} event(s) delivered")
+    return damage is None

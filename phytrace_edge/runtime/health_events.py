@@ -1,0 +1,97 @@
+"""``bridge.health`` events: the bridge's own state, shipped through its own queue.
+
+Every HEALTH_EVENT_INTERVAL_S, and at once when the health verdict changes (healthy
+<-> unhealthy), the service turns the document ``status`` shows into an event. The
+event waits in the queue like any other, so an outage's history (when the bridge went
+unhealthy and why) reaches PhyCloud after the outage. Only figures and the problems'
+text go out: the API key is never part of the status document.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from phytrace_edge.builder.envelope import envelope
+
+EVENT_TYPE_HEALTH = "bridge.health"
+PROBLEMS_MAX = 64
+PROBLEM_MAX_CHARS = 512
+TOPICS_MAX = 256
+
+
+class HealthSchedule:
+    """When a health event is due: ``trigger`` gives ``"change"``, ``"interval"`` or
+    None for each verdict; the first verdict counts as a change (``start``)."""
+
+    def __init__(self, interval_s: float) -> None:
+        self.interval_s = interval_s
+        self._healthy: bool | None = None
+        self._last_at: float | None = None
+
+    def trigger(self, healthy: bool, now_s: float) -> str | None:
+        if not self.interval_s:
+            return None
+        if self._healthy is None:
+            reason = "start"
+        elif healthy != self._healthy:
+            reason = "change"
+        elif self._last_at is not None and now_s - self._last_at >= self.interval_s:
+            reason = "interval"
+        else:
+            return None
+        self._healthy, self._last_at = healthy, now_s
+        return reason
+
+
+def health_event(
+    identity: Mapping[str, str],
+    report: Mapping[str, Any],
+    trigger: str,
+    uptime_s: float,
+    captured_at_s: float,
+) -> dict[str, Any]:
+    """One ``bridge.health`` event from a status document (``health.report``)."""
+    queue = report["queue"]
+    event = {
+        **envelope(identity, EVENT_TYPE_HEALTH, captured_at_s),
+        "trigger": trigger,
+        "healthy": bool(report["healthy"]),
+        "problems": [p[:PROBLEM_MAX_CHARS] for p in report["problems"][:PROBLEMS_MAX]],
+        "version": str(report["service"].get("version", "")),
+        "uptime_s": round(max(0.0, uptime_s), 1),
+        "queue": _present(
+            depth=queue["depth"],
+            bytes=queue["bytes"],
+            fill=queue["fill"],
+            oldest_age_s=None if queue["oldest_age_s"] is None else max(0, queue["oldest_age_s"]),
+        ),
+        "drops": dict(report["drops"]),
+        "dead_letters": report["dead_letters"],
+        "send_rate_eps": report["send_rate_eps"],
+        "events_sent": report["sent_total"],
+        "retries": report["retries"],
+        "thread_restarts": dict(report["thread_restarts"]),
+        "topics": {
+            topic: _topic(figures) for topic, figures in list(report["topics"].items())[:TOPICS_MAX]
+        },
+    }
+    if report.get("last_error_class"):
+        event["last_error_class"] = report["last_error_class"]
+    return event
+
+
+def _topic(figures: Mapping[str, Any]) -> dict[str, Any]:
+    age = figures.get("last_seen_age_s")
+    return _present(
+        received=figures.get("received", 0),
+        rate_hz=figures.get("rate_hz", 0.0),
+        last_seen_age_s=None if age is None else max(0.0, age),
+        rejected=sum(figures.get("rejected", {}).values()),
+        publishers=figures.get("publishers"),
+        qos_incompatible=figures.get("qos_incompatible"),
+    )
+
+
+def _present(**values: Any) -> dict[str, Any]:
+    return {key: value for key, value in values.items() if value is not None}

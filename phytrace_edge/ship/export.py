@@ -1,0 +1,122 @@
+"""``export`` and ``import``: the backlog into a hand-carry file, oldest first, for a
+robot that has no network, and such a file into a queue that a sender delivers from
+(``handcarry.py`` is the file format).
+
+The events are claimed under leases like a sender's, written, fsynced, and read back;
+only when the file under its final name holds every claimed event are they deleted
+from the queue (counted as ``exported_total``). Anything else, a full stick, a pulled
+stick or a SIGKILL, leaves the events in the queue (a killed export's leases are taken
+back by the next process) and at most a ``.part`` file. Run it again for the next
+file: each export takes the oldest events still queued.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+from phytrace_edge.errors import QueueError
+from phytrace_edge.queue.records import Batch
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, Manifest, open_export
+
+BATCH_EVENTS = 500
+BATCH_JSON_BYTES = 4 * 1024 * 1024
+MANIFEST_ROOM = 4096  # bytes kept free under --max-bytes for the manifest
+
+
+def export_backlog(
+    store: QueueStore,
+    path: Path,
+    source_id: str,
+    max_bytes: int,
+    progress: Callable[[int], None] = lambda events: None,
+) -> Manifest | None:
+    """Write the oldest queued events to ``path`` (at most about ``max_bytes``), verify
+    the file and delete them from the queue; the file's manifest, or None when the
+    queue had nothing to export (no file is written then)."""
+    writer = ExportWriter(path, source_id, store.now())
+    batches: list[Batch] = []
+    try:
+        _fill(store, writer, batches, max_bytes, progress)
+        if not batches:
+            writer.abort()
+            return None
+        manifest = writer.finish()
+    except BaseException:
+        writer.abort()
+        _release(store, batches)
+        raise
+    try:
+        _verify(path, [event.event_id for batch in batches for event in batch.events])
+    except BaseException:
+        _release(store, batches)
+        raise
+    for batch in batches:
+        store.ack(batch, exported=True)
+    return manifest
+
+
+def _fill(
+    store: QueueStore,
+    writer: ExportWriter,
+    batches: list[Batch],
+    max_bytes: int,
+    progress: Callable[[int], None],
+) -> None:
+    """Claim and write batches until the queue is empty or the next batch might not
+    fit; leases are renewed as the file grows (a slow stick)."""
+    renewed_at, largest = time.monotonic(), 0
+    while writer.compressed_bytes + 2 * largest + MANIFEST_ROOM <= max_bytes or not batches:
+        batch = store.claim_batch(BATCH_EVENTS, BATCH_JSON_BYTES, important_first=False)
+        if batch is None:
+            return
+        batches.append(batch)
+        before = writer.compressed_bytes
+        for event in batch.events:
+            writer.write(event.id, event.json)
+        writer.flush_block()
+        largest = max(largest, writer.compressed_bytes - before)
+        progress(len(batch.events))
+        if time.monotonic() - renewed_at > store.lease_s / 3:
+            for held in batches:
+                store.renew(held)
+            renewed_at = time.monotonic()
+
+
+def _verify(path: Path, event_ids: list[str]) -> None:
+    """Read the finished file back: every claimed event, in order, and a manifest
+    that matches; ``DamagedExport`` otherwise (a stick that lies about its writes)."""
+    reader = open_export(path)
+    read = [event["event_id"] for event in reader.events()]
+    if read != event_ids:
+        raise DamagedExport(str(path), 2, "the file read back does not hold the exported events")
+
+
+def _release(store: QueueStore, batches: list[Batch]) -> None:
+    """Give the claimed events back to the queue (best effort: the leases run out)."""
+    for batch in batches:
+        with contextlib.suppress(QueueError):
+            store.release(batch)
+
+
+def export_chunks(
+    path: Path, size: int
+) -> Iterator[tuple[list[dict[str, Any]], DamagedExport | None]]:
+    """A hand-carry file's events in chunks of ``size``, each with None, and the last
+    with the damage found (``DamagedExport``) if the file is not whole: the events
+    before the first bad line still come, so an import keeps what can be kept."""
+    chunk: list[dict[str, Any]] = []
+    try:
+        for event in open_export(path).events():
+            chunk.append(event)
+            if len(chunk) >= size:
+                yield chunk, None
+                chunk = []
+    except DamagedExport as damage:
+        yield chunk, damage
+        return
+    yield chunk, None

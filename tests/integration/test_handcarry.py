@@ -1,0 +1,144 @@
+"""Hand-carry: a robot without a network exports its backlog to files, another machine
+imports them, and PhyCloud (the real stub) holds every event exactly once, also when a
+file is imported twice, when an export is SIGKILLed mid-file, and when a file is
+damaged (real queue files, real subprocesses, real HTTP)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import zstandard
+
+from phytrace_edge.builder.envelope import envelope
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.ship.handcarry import open_export
+from tests.processes import python_env, run_cli, wait_for
+
+IDENTITY = {"source_id": "mine-amr-3", "source_type": "amr"}
+START_S = 1_795_300_000.0
+
+
+def fill_robot_queue(path: Path, count: int) -> list[str]:
+    """A robot's backlog of ``count`` valid UDM events (a day in a mine); their ids."""
+    events = [
+        {
+            **envelope(IDENTITY, "telemetry.periodic", START_S + i * 0.2),
+            "power": {"battery": {"voltage_v": 24.0 + (i % 10) / 10}},
+        }
+        for i in range(count)
+    ]
+    with QueueStore.open(path) as store:
+        for start in range(0, count, 5000):
+            store.put_many(events[start : start + 5000])
+    return [event["event_id"] for event in events]
+
+
+def robot(queue: Path) -> dict[str, str]:
+    """The robot's settings: its endpoint is unreachable (nothing listens on port 9)."""
+    return {
+        "QUEUE_PATH": str(queue),
+        "PHYCLOUD_ENDPOINT": "http://127.0.0.1:9/api/v1",
+        "SOURCE_ID": IDENTITY["source_id"],
+    }
+
+
+def laptop(tmp_path: Path, stub) -> dict[str, str]:
+    return {"QUEUE_PATH": str(tmp_path / "laptop" / "queue.db"), "PHYCLOUD_ENDPOINT": stub.endpoint}
+
+
+def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_path, stub) -> None:
+    queue = tmp_path / "robot.db"
+    ids = fill_robot_queue(queue, 3000)
+    first = run_cli(
+        "export", "--out", str(tmp_path / "stick1.phx"), "--max-bytes", "64KiB", **robot(queue)
+    )
+    assert first.returncode == 1, first.stderr  # events are left for the next stick
+    assert "left in the queue: run export again" in first.stdout
+    second = run_cli("export", "--out", str(tmp_path / "stick2.phx"), **robot(queue))
+    assert second.returncode == 0, second.stderr
+    assert "the queue is empty" in second.stdout
+    sticks = [tmp_path / "stick1.phx", tmp_path / "stick2.phx"]
+    assert sticks[0].stat().st_size <= 64 * 1024
+    manifests = []
+    for stick in sticks:
+        reader = open_export(stick)
+        list(reader.events())
+        manifests.append(reader.manifest)
+    assert manifests[0].source_id == "mine-amr-3" and manifests[0].schema_version == "1.1.0"
+    assert manifests[0].last_id < manifests[1].first_id  # oldest first, no overlap
+    assert sum(m.events for m in manifests) == 3000
+    assert run_cli("status", "--json", **robot(queue)).stdout.count('"exported_total": 3000') == 1
+
+    imported = run_cli("import", *map(str, sticks), **laptop(tmp_path, stub))
+    assert imported.returncode == 0, imported.stderr
+    again = run_cli("import", str(sticks[0]), **laptop(tmp_path, stub))
+    assert again.returncode == 0, again.stderr
+    received = stub.event_ids()
+    assert sorted(received) == sorted(ids)  # each event once
+    assert stub.stats()["duplicates"] == manifests[0].events  # the second import, deduplicated
+
+
+def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_path, stub) -> None:
+    queue = tmp_path / "robot.db"
+    ids = fill_robot_queue(queue, 30_000)
+    out = tmp_path / "stick.phx"
+    part = tmp_path / "stick.phx.part"
+    export = subprocess.Popen(
+        [sys.executable, "-m", "phytrace_edge", "export", "--out", str(out)],
+        env=python_env(**robot(queue)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_for(
+            lambda: part.exists() and part.stat().st_size > 8192,
+            60,
+            "the export to write",
+            every=0.005,
+        )
+    finally:
+        os.kill(export.pid, signal.SIGKILL)
+        export.wait(timeout=10)
+    assert part.exists() and not out.exists(), "the export finished before it could be killed"
+
+    # the operator imports the half-written file anyway: what it holds arrives once
+    half = run_cli("import", str(part), **laptop(tmp_path, stub))
+    assert half.returncode == 1 and "truncated" in half.stderr, half.stderr
+    assert 0 < len(stub.event_ids()) < 30_000
+
+    # and exports again: the killed export's claims come back, nothing was deleted
+    again = run_cli("export", "--out", str(tmp_path / "stick-again.phx"), **robot(queue))
+    assert again.returncode == 0, again.stderr
+    assert "exported 30000 event(s)" in again.stdout
+    imported = run_cli(
+        "import", str(tmp_path / "stick-again.phx"), timeout=300, **laptop(tmp_path, stub)
+    )
+    assert imported.returncode == 0, imported.stderr
+    assert sorted(stub.event_ids()) == sorted(ids)
+
+
+def test_a_damaged_file_is_imported_up_to_its_first_bad_line(tmp_path, stub) -> None:
+    queue = tmp_path / "robot.db"
+    ids = fill_robot_queue(queue, 1000)
+    stick = tmp_path / "stick.phx"
+    assert run_cli("export", "--out", str(stick), **robot(queue)).returncode == 0
+    lines = zstandard.ZstdDecompressor().stream_reader(stick.read_bytes()).read().splitlines(True)
+    lines[401] = b'{"event_id": "cut here\n'  # line 402: the header, then events 1..400 are good
+    damaged = tmp_path / "damaged.phx"
+    damaged.write_bytes(zstandard.ZstdCompressor().compress(b"".join(lines)))
+    before = damaged.read_bytes()
+
+    result = run_cli("import", str(damaged), **laptop(tmp_path, stub))
+    assert result.returncode == 1
+    assert f"{damaged}: line 402: not JSON" in result.stderr
+    assert "the 400 event(s) before it were sent" in result.stderr
+    assert sorted(stub.event_ids()) == sorted(ids[:400])
+    assert damaged.read_bytes() == before  # nothing is deleted or changed
+
+    # the whole file, from the robot's stick, completes it
+    assert run_cli("import", str(stick), **laptop(tmp_path, stub)).returncode == 0
+    assert sorted(stub.event_ids()) == sorted(ids)
