@@ -99,3 +99,23 @@ def print_json(document: Any) -> None:
     import json
 
     sys.stdout.write(json.dumps(document, indent=2, ensure_ascii=False) + "\n")
+
+
+def add_timeout_flag(parser: argparse.ArgumentParser) -> None:
+    """``--timeout S`` of the commands that send (``drain``, ``import``)."""
+    from phytrace_edge.config.parsers import positive_float
+
+    parser.add_argument(
+        "--timeout",
+        type=checked(positive_float(10**7), "seconds"),
+        help="give up after this many seconds",
+    )
+
+
+def stop_on_signals(stop: Any) -> None:
+    """SIGINT and SIGTERM set ``stop`` (a threading.Event): the sender finishes the
+    request on the wire and keeps the rest queued."""
+    import signal
+
+    signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
+    signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())

@@ -6,8 +6,7 @@ import argparse
 import sys
 import time
 
-from phytrace_edge.cli.common import checked
-from phytrace_edge.config.parsers import positive_float
+from phytrace_edge.cli.common import add_timeout_flag, stop_on_signals
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
@@ -22,17 +21,11 @@ HELP = "send the whole backlog now, with a progress bar"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--timeout",
-        type=checked(positive_float(10**7), "seconds"),
-        help="give up after this many seconds",
-    )
+    add_timeout_flag(parser)
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Send the whole backlog now; exit 0 only when the queue is empty at the end."""
-    import signal
-
     from tqdm import tqdm
 
     from phytrace_edge.ship.sender import Sender
@@ -41,8 +34,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     started = time.monotonic()
     with wiring.open_queue(settings) as store:
         sender = Sender(store, wiring.http_transport(settings), wiring.send_policy(settings))
-        signal.signal(signal.SIGINT, lambda signum, frame: sender.stop.set())
-        signal.signal(signal.SIGTERM, lambda signum, frame: sender.stop.set())
+        stop_on_signals(sender.stop)
         depth = store.counter("depth")
         with tqdm(total=depth, unit="ev", desc="draining", file=sys.stderr, disable=None) as bar:
 

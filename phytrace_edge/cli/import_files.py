@@ -7,8 +7,7 @@ import argparse
 import sys
 import time
 
-from phytrace_edge.cli.common import checked, error
-from phytrace_edge.config.parsers import positive_float
+from phytrace_edge.cli.common import add_timeout_flag, error, stop_on_signals
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, QueueError
 from phytrace_edge.runtime import wiring
 
@@ -31,17 +30,12 @@ CHUNK_EVENTS = 20_000  # staged, then sent, at a time: the staging queue stays s
 
 def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE", help="files to upload")
-    parser.add_argument(
-        "--timeout",
-        type=checked(positive_float(10**7), "seconds"),
-        help="give up after this many seconds",
-    )
+    add_timeout_flag(parser)
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Each file in turn: read it into a staging queue, then send that queue empty."""
     import dataclasses
-    import signal
     import tempfile
     from pathlib import Path
 
@@ -62,8 +56,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
         path = Path(staging) / "queue.db"
         with QueueStore.open(path, limits=limits, lease_s=IMPORT_LEASE_S) as store:
             sender = Sender(store, wiring.http_transport(settings), policy)
-            signal.signal(signal.SIGINT, lambda signum, frame: sender.stop.set())
-            signal.signal(signal.SIGTERM, lambda signum, frame: sender.stop.set())
+            stop_on_signals(sender.stop)
             for file in args.files:
                 complete = _import_one(Path(file), store, sender, deadline) and complete
                 if sender.stop.is_set():
