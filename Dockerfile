@@ -4,7 +4,13 @@
 #   docker build -t phytrace-edge .
 #   docker run --network host -v phytrace-queue:/var/lib/phytrace-edge \
 #     -e PHYCLOUD_ENDPOINT=... -e PHYCLOUD_API_KEY=... -e SOURCE_ID=... phytrace-edge
-FROM ros:jazzy-ros-base
+#
+# The tests build it on a stand-in base made on the machine (tests/container/standin.py:
+# Debian with Python, no ROS): --build-arg BASE_IMAGE=<stand-in> --build-arg ROS_PACKAGES=
+# (empty: the stand-in has python3-venv and no ROS repository). Production uses neither.
+ARG BASE_IMAGE=ros:jazzy-ros-base
+FROM ${BASE_IMAGE}
+ARG ROS_PACKAGES="ros-jazzy-rmw-cyclonedds-cpp"
 
 SHELL ["/bin/bash", "-o", "pipefail", "-c"]
 ENV DEBIAN_FRONTEND=noninteractive \
@@ -16,10 +22,11 @@ ENV DEBIAN_FRONTEND=noninteractive \
 # python3-venv for an isolated install that still sees rclpy and the system numpy
 # rclpy was built against.
 # hadolint ignore=DL3008
-RUN apt-get update \
-    && apt-get install -y --no-install-recommends \
-        python3-venv ros-jazzy-rmw-cyclonedds-cpp \
-    && rm -rf /var/lib/apt/lists/*
+RUN if [ -n "${ROS_PACKAGES}" ]; then \
+        apt-get update \
+        && apt-get install -y --no-install-recommends python3-venv ${ROS_PACKAGES} \
+        && rm -rf /var/lib/apt/lists/*; \
+    fi
 
 WORKDIR /src
 COPY pyproject.toml README.md ./

@@ -79,11 +79,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             os.environ,
             config_path=getattr(args, "config", None),
             ros_params=ros_parameters(args.ros_args),
+            env_file=getattr(args, "env_file", None),
         )
         if args.logs:
             from phytrace_edge.runtime.wiring import configure_logging
 
-            configure_logging(loaded.settings)
+            configure_logging(loaded.settings, os.environ)
         code: int = args.handler(args, loaded)
         sys.stdout.flush()  # here, so that a reader gone away is handled below
         return code

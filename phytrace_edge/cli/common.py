@@ -56,6 +56,12 @@ FLAG_ALIASES = {"bridge_input": ("--input",)}
 def add_setting_flags(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("settings (each also an environment variable)")
     group.add_argument("--config", metavar="PATH", help="TOML config file (or PHYTRACE_CONFIG)")
+    group.add_argument(
+        "--env-file",
+        metavar="PATH",
+        help="KEY=VALUE settings file, e.g. the service's (or PHYTRACE_ENV_FILE); "
+        "the environment wins",
+    )
     for info in setting_infos():
         group.add_argument(
             *FLAG_ALIASES.get(info.key, ()),

@@ -148,14 +148,50 @@ def default_state_dir(env: Mapping[str, str]) -> str:
     return os.path.join(os.path.expanduser(base), "phytrace-edge")
 
 
+ENV_FILE_MAX_BYTES = 64 * 1024
+
+
+def read_env_file(path: str) -> dict[str, str]:
+    """A systemd ``EnvironmentFile`` (``KEY=VALUE`` lines; ``#`` and ``;`` comments;
+    a value may be quoted) as a dict: the service's settings, for a command run beside
+    the service (``status --env-file /etc/phytrace-edge/phytrace-edge.env``)."""
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(ENV_FILE_MAX_BYTES + 1)
+    except FileNotFoundError:
+        raise ConfigError(f"env file {path}: not found") from None
+    except OSError as exc:
+        raise ConfigError(f"env file {path}: cannot read ({exc.strerror})") from None
+    if len(data) > ENV_FILE_MAX_BYTES:
+        raise ConfigError(f"env file {path}: larger than 64 KiB - is it the right file?")
+    values = {}
+    for number, raw in enumerate(data.decode("utf-8", "replace").splitlines(), start=1):
+        line = raw.strip()
+        if not line or line[0] in "#;":
+            continue
+        key, equals, value = line.partition("=")
+        key, value = key.strip(), value.strip()
+        if not equals or not key.isidentifier() or not key.isascii():
+            raise ConfigError(f"env file {path}: line {number} is not KEY=VALUE")
+        if len(value) >= 2 and value[0] == value[-1] and value[0] in "\"'":
+            value = value[1:-1]
+        values[key] = value
+    return values
+
+
 def settings_from_environment(
     flags: Mapping[str, Any] | None,
     env: Mapping[str, str],
     config_path: str | None = None,
     ros_params: Mapping[str, Any] | None = None,
+    env_file: str | None = None,
 ) -> LoadedSettings:
-    """Load settings the way the CLI does: flags, the process environment ``env``, the
-    config file named by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
+    """Load settings the way the CLI does: flags, the process environment ``env`` over
+    the env file named by ``--env-file`` or ``PHYTRACE_ENV_FILE``, the config file named
+    by ``--config`` or ``PHYTRACE_CONFIG``, and ROS parameters."""
+    env_file = env_file or env.get("PHYTRACE_ENV_FILE") or None
+    if env_file:
+        env = {**read_env_file(env_file), **env}
     path = config_path or env.get("PHYTRACE_CONFIG") or None
     file_values = read_config_file(path) if path else {}
     return load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")

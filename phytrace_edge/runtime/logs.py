@@ -2,13 +2,18 @@
 
 The API key is never passed to a logger on purpose; the redaction filter is the
 second line of defence, should a library ever echo a header or a URL with it.
+
+Under systemd, stderr goes to the journal (systemd says so in ``JOURNAL_STREAM``):
+each line then starts with its syslog priority (``<4>`` for WARNING, sd-daemon(3)), so
+``journalctl -p warning`` finds warnings and errors; journald strips the prefix.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import orjson
@@ -17,6 +22,38 @@ from phytrace_edge.redact import leak_forms, redact
 from phytrace_edge.udm.event import format_timestamp
 
 TEXT_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+
+
+# logging level -> syslog priority (sd-daemon(3): SD_ERR, SD_WARNING, ...)
+PRIORITIES = ((logging.CRITICAL, 2), (logging.ERROR, 3), (logging.WARNING, 4), (logging.INFO, 6))
+
+
+def priority(levelno: int) -> int:
+    return next((p for level, p in PRIORITIES if levelno >= level), 7)
+
+
+class JournalPriorities(logging.Formatter):
+    """Wraps a formatter: every line of a record starts with ``<N>``, its priority
+    (a traceback's lines too, or journald would file them as info)."""
+
+    def __init__(self, inner: logging.Formatter) -> None:
+        super().__init__()
+        self._inner = inner
+
+    def format(self, record: logging.LogRecord) -> str:
+        prefix = f"<{priority(record.levelno)}>"
+        return "\n".join(prefix + line for line in self._inner.format(record).split("\n"))
+
+
+def stderr_is_the_journal(env: Mapping[str, str], stream: object = sys.stderr) -> bool:
+    """Whether ``stream`` is the journal stream systemd connected (``JOURNAL_STREAM``
+    is ``device:inode`` of it; a child whose stderr was redirected does not match)."""
+    device, _, inode = env.get("JOURNAL_STREAM", "").partition(":")
+    try:
+        info = os.fstat(stream.fileno())  # type: ignore[attr-defined]
+        return (info.st_dev, info.st_ino) == (int(device), int(inode))
+    except (ValueError, OSError, AttributeError):
+        return False
 
 
 class JsonFormatter(logging.Formatter):
@@ -54,10 +91,16 @@ class RedactSecrets(logging.Filter):
         return True
 
 
-def configure_logging(level: str, fmt: str, secrets: Iterable[str] = ()) -> None:
-    """Route every log record to stderr, one line each."""
+def configure_logging(
+    level: str, fmt: str, secrets: Iterable[str] = (), env: Mapping[str, str] | None = None
+) -> None:
+    """Route every log record to stderr, one line each (with journal priorities when
+    ``env``, the process environment, says stderr is the journal)."""
     handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(JsonFormatter() if fmt == "json" else logging.Formatter(TEXT_FORMAT))
+    formatter = JsonFormatter() if fmt == "json" else logging.Formatter(TEXT_FORMAT)
+    if env is not None and stderr_is_the_journal(env):
+        formatter = JournalPriorities(formatter)
+    handler.setFormatter(formatter)
     handler.addFilter(RedactSecrets(secrets))
     root = logging.getLogger()
     root.handlers[:] = [handler]

@@ -38,11 +38,12 @@ MIN_LEASE_S = 60.0
 MIN_STALL_S = 30.0
 
 
-def configure_logging(s: Settings) -> None:
-    """Logging as LOG_LEVEL and LOG_FORMAT say, with the API key masked."""
+def configure_logging(s: Settings, env: Mapping[str, str]) -> None:
+    """Logging as LOG_LEVEL and LOG_FORMAT say, with the API key masked; ``env`` tells
+    whether stderr is systemd's journal."""
     from phytrace_edge.runtime.logs import configure_logging as configure
 
-    configure(s.log_level, s.log_format, [s.phycloud_api_key.reveal()])
+    configure(s.log_level, s.log_format, [s.phycloud_api_key.reveal()], env)
 
 
 def identity(s: Settings) -> Identity:

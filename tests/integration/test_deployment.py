@@ -123,7 +123,10 @@ def test_dockerfile_lints_clean() -> None:
 
 def test_dockerfile_invariants(dockerfile: list[str]) -> None:
     text = "\n".join(dockerfile)
-    assert next(line for line in dockerfile if line.startswith("FROM")) == "FROM ros:jazzy-ros-base"
+    # the production base and packages are the defaults; tests override them
+    assert "ARG BASE_IMAGE=ros:jazzy-ros-base" in dockerfile
+    assert next(line for line in dockerfile if line.startswith("FROM")) == "FROM ${BASE_IMAGE}"
+    assert 'ARG ROS_PACKAGES="ros-jazzy-rmw-cyclonedds-cpp"' in dockerfile
     user = [line.split()[1] for line in dockerfile if line.startswith("USER")][-1]
     assert user.split(":")[0] not in ("0", "root")
     assert 'VOLUME ["/var/lib/phytrace-edge"]' in text
@@ -156,16 +159,43 @@ def test_compose_invariants(compose: dict) -> None:
         assert f"${{{variable}" in str(bridge["environment"][variable])
     stub = compose["services"]["phycloud-stub"]
     assert stub["profiles"] == ["dev"] and "stub" in stub["command"]
+    # the stub is no bridge: the image's HEALTHCHECK (`status`) would call it unhealthy
+    check = " ".join(stub["healthcheck"]["test"])
+    assert "/healthz" in check and "status" not in check
     assert "profiles" not in bridge
 
 
-def test_the_queue_outside_a_volume_is_reported_loudly(
-    tmp_path: Path, caplog: pytest.LogCaptureFixture
+ANONYMOUS = "9f3c" * 16  # how Docker names the volume of an image's VOLUME without -v
+MOUNTINFO = f"""\
+22 1 0:21 / / rw,relatime - overlay overlay rw,lowerdir=/var/lib/docker/overlay2/l/A
+30 22 8:1 /var/lib/docker/volumes/{ANONYMOUS}/_data /var/lib/phytrace-edge rw - ext4 /dev/sda1 rw
+31 22 8:1 /var/lib/docker/volumes/phytrace-queue/_data /srv/named rw - ext4 /dev/sda1 rw
+32 22 8:1 /home/me/queue\\040dir /srv/bind rw - ext4 /dev/sda1 rw
+"""
+
+
+@pytest.mark.parametrize(
+    ("folder", "expected", "says"),
+    [
+        ("/var/lib/phytrace-edge", "anonymous", "anonymous volume (no -v was given)"),
+        ("/srv/named", None, ""),
+        ("/srv/bind", None, ""),  # a bind mount of the host's folder is kept too
+        ("/opt/queue", "no volume", "not on a mounted volume"),
+    ],
+)
+def test_a_queue_outside_a_named_volume_is_reported_loudly(
+    folder: str, expected: str | None, says: str, caplog: pytest.LogCaptureFixture
 ) -> None:
+    env = {"PHYTRACE_CONTAINER": "1"}
     with caplog.at_level(logging.WARNING):
-        assert warn_if_not_on_a_volume(tmp_path / "queue.db", {"PHYTRACE_CONTAINER": "1"})
-    assert "not on a mounted volume" in caplog.text
-    assert not warn_if_not_on_a_volume(tmp_path / "queue.db", {})  # not in the container
-    mounted = next((p for p in ("/dev/shm", "/dev") if os.path.ismount(p)), None)
-    if mounted:
-        assert not warn_if_not_on_a_volume(Path(mounted) / "q.db", {"PHYTRACE_CONTAINER": "1"})
+        assert warn_if_not_on_a_volume(Path(folder) / "queue.db", env, MOUNTINFO) == expected
+    assert says in caplog.text
+    assert (expected is None) == (not caplog.records)
+    assert warn_if_not_on_a_volume(Path(folder) / "queue.db", {}, MOUNTINFO) is None  # no container
+
+
+def test_this_process_mounts_are_read(tmp_path: Path) -> None:
+    """The real /proc/self/mountinfo: a folder under a mount point counts as on it."""
+    mounted = next((p for p in ("/dev/shm", "/proc") if os.path.ismount(p)), None)
+    assert mounted is not None
+    assert warn_if_not_on_a_volume(Path(mounted) / "q.db", {"PHYTRACE_CONTAINER": "1"}) is None

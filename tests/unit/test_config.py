@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from phytrace_edge.cli import main
-from phytrace_edge.config import load_settings, setting_infos
+from phytrace_edge.config import load_settings, setting_infos, settings_from_environment
 from phytrace_edge.config.parsers import KNOWN_TOPICS
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.redact import Secret
@@ -301,3 +301,42 @@ def test_topics_extra_rejects_bad_entries_in_one_line(raw: str) -> None:
         load_settings(env={"TOPICS_EXTRA": raw})
     assert str(caught.value).startswith("TOPICS_EXTRA=")
     assert "\n" not in str(caught.value)
+
+
+def test_the_service_env_file_gives_status_the_service_queue(tmp_path: Path) -> None:
+    """`status --env-file` reads the settings the unit's EnvironmentFile gives the
+    service (comments, quotes and all), so an operator gets the service's queue."""
+    from phytrace_edge.config.loading import read_env_file
+
+    shipped = read_env_file(str(Path(__file__).parents[2] / "systemd" / "phytrace-edge.env"))
+    assert shipped["QUEUE_PATH"] == "/var/lib/phytrace-edge/queue.db"
+    env_file = tmp_path / "phytrace-edge.env"
+    env_file.write_text(
+        "# the service's settings\n\n; also a comment\n"
+        f"QUEUE_PATH='{tmp_path / 'service' / 'queue.db'}'\n"
+        'SOURCE_ID="robot-9"\nQUEUE_MAX_BYTES=2GiB\n'
+    )
+    result = subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "status", "--env-file", str(env_file)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={k: v for k, v in os.environ.items() if not k.startswith(("QUEUE_", "SOURCE_"))},
+    )
+    assert result.returncode == 3
+    assert result.stderr.strip() == (
+        f"phytrace-edge: error: no queue at {tmp_path / 'service' / 'queue.db'}: "
+        "the bridge never ran with this QUEUE_PATH"
+    )
+    loaded = settings_from_environment(None, {"SOURCE_ID": "from-env"}, env_file=str(env_file))
+    assert loaded.settings.source_id == "from-env"  # the environment wins over the file
+    assert loaded.settings.queue_max_bytes == 2 * 1024**3
+
+
+def test_a_bad_env_file_is_one_line(tmp_path: Path) -> None:
+    env_file = tmp_path / "bad.env"
+    env_file.write_text("QUEUE_PATH=/q.db\nnot a setting\n")
+    with pytest.raises(ConfigError, match=r"bad.env: line 2 is not KEY=VALUE$"):
+        settings_from_environment(None, {}, env_file=str(env_file))
+    with pytest.raises(ConfigError, match=r"env file .*missing\.env: not found"):
+        settings_from_environment(None, {}, env_file=str(tmp_path / "missing.env"))
