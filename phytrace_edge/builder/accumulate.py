@@ -110,13 +110,23 @@ class TransitionTracker:
 
 @dataclass
 class GoalTracker:
-    """Goals received since the last event (the latest is also the current goal)."""
+    """Goals received since the last event (the latest is also the current goal).
+
+    A goal with the stamp and pose of the previous one is that goal again, not a new
+    one: a latched goal replayed to a subscription re-created as transient-local."""
 
     pending: list[dict[str, Any]] = field(default_factory=list)
+    last_key: tuple[Any, ...] | None = None
 
     def observe(self, reading: dict[str, Any], at_wall_s: float) -> None:
         goal = reading.get("goal")
-        if goal is not None and len(self.pending) < MAX_ITEMS_PER_EVENT:
+        if goal is None:
+            return
+        key = (reading.get("stamp_ns"), *sorted(goal.items()))
+        if key == self.last_key:
+            return
+        self.last_key = key
+        if len(self.pending) < MAX_ITEMS_PER_EVENT:
             self.pending.append({**goal, "received_at": format_timestamp(at_wall_s)})
 
     def take(self) -> list[dict[str, Any]]:

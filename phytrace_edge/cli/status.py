@@ -114,10 +114,32 @@ def render_status(d: dict[str, Any]) -> str:
     for topic, t in d["topics"].items():
         age = t.get("last_seen_age_s")
         seen = "" if age is None else f", last {age:.1f} s ago"
-        rejected = sum(t.get("rejected", {}).values())
         lines.append(
             f"  {topic:<16} {t['rate_hz']:.1f} Hz, {t['received']} received{seen}"
-            + (f", {rejected} rejected" if rejected else "")
+            + "".join(f", {note}" for note in topic_notes(t))
         )
     lines += [f"  problem: {problem}" for problem in d["problems"]]
     return "\n".join(lines)
+
+
+def topic_notes(t: dict[str, Any]) -> list[str]:
+    """What else is worth a glance about a topic: why it is silent or broken, and what
+    became of an extra topic's or /rosout's messages."""
+    rejected = sum(t.get("rejected", {}).values())
+    notes = [f"{rejected} rejected"] if rejected else []
+    if t.get("publishers") == 0:
+        notes.append("no publisher")
+    if t.get("qos_incompatible"):
+        notes.append(f"QoS incompatible with {t['qos_incompatible']} publisher(s)")
+    if t.get("type_unknown"):
+        notes.append(f"type {t['type_unknown']} not installed here")
+    if t.get("skipped"):
+        notes.append(f"skipped: {t['skipped']}")
+    for key, label in (
+        ("events", "events"),
+        ("records", "log records"),
+        ("suppressed", "held back"),
+    ):
+        if t.get(key):
+            notes.append(f"{t[key]} {label}")
+    return notes

@@ -145,12 +145,24 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
             "the extra topics and the log record",
         )
         stats = source.topic_stats()
+        # the robot goes away: its writers unregister their instances, samples that
+        # carry no data, which must not reach the handlers
+        rejected_before = dict(dispatcher.rejected)
+        publisher.stdin.close()
+        publisher.wait(timeout=20)
+        wait_for(
+            lambda: source.topic_stats().get("/delivery/status", {}).get("without_data"),
+            30,
+            "the writers' unregistration",
+        )
+        assert dict(dispatcher.rejected) == rejected_before == {}
     finally:
         stop.set()
         if source is not None:
             source.stop()
-        publisher.stdin.close()
-        publisher.wait(timeout=20)
+        if publisher.poll() is None:
+            publisher.stdin.close()
+            publisher.wait(timeout=20)
     assert find_violation(event) is None
     assert event["location"]["local"] == pytest.approx(
         {"coordinate_frame": "odom", "x_m": 12.34, "y_m": 5.67, "z_m": 0.0, "yaw_deg": 45.2}

@@ -237,3 +237,14 @@ def test_extra_topics_take_their_type_from_the_graph(graph) -> None:
     topic_events = [e for e in g.events if e["event_type"] == "telemetry.topic"]
     assert [e["data"]["temperature"] for e in topic_events] == [40.0, 41.5]
     assert {e["topic"] for e in topic_events} == {"/motor/temperature"}  # the configured name
+
+
+def test_an_rclpy_that_fails_to_import_says_why() -> None:
+    from phytrace_edge.ingest.sources.ros import import_error_message
+
+    not_sourced = import_error_message(ModuleNotFoundError("No module named 'rclpy'", name="rclpy"))
+    assert "source ROS 2 first" in not_sourced
+    missing = import_error_message(ModuleNotFoundError("No module named 'yaml'", name="yaml"))
+    assert "No module named 'yaml'" in missing and "source ROS 2 first" not in missing
+    broken = import_error_message(ImportError("libyaml.so: cannot open shared object file"))
+    assert "libyaml.so" in broken

@@ -160,6 +160,18 @@ def test_new_goals_between_ticks_are_all_reported(builder: UDMBuilder) -> None:
     assert "new_goals" not in builder.build_event()["navigation"]
 
 
+def test_a_replayed_goal_is_not_a_new_goal(builder: UDMBuilder) -> None:
+    """A latched goal replayed (same stamp, same pose) when the subscription is
+    re-created as transient-local; the same pose with a new stamp is a new goal."""
+    goal = {"frame_id": "map", "x_m": 45.0, "y_m": 22.0, "yaw_deg": 90.0}
+    builder.add_reading("/goal_pose", {"goal": goal, "stamp_ns": 1_000})
+    assert len(builder.build_event()["navigation"]["new_goals"]) == 1
+    builder.add_reading("/goal_pose", {"goal": dict(goal), "stamp_ns": 1_000})  # the replay
+    assert "new_goals" not in builder.build_event()["navigation"]
+    builder.add_reading("/goal_pose", {"goal": dict(goal), "stamp_ns": 2_000})  # sent again
+    assert len(builder.build_event()["navigation"]["new_goals"]) == 1
+
+
 def test_heading_needs_gps_and_imu_and_is_a_compass_heading(builder: UDMBuilder) -> None:
     builder.add_reading(
         "/imu/data", {"imu": {"orientation_deg": {"roll": 0, "pitch": 0, "yaw": 0.0}}}

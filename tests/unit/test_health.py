@@ -69,3 +69,20 @@ def test_a_queue_error_since_the_last_success_is_a_problem_until_a_send_succeeds
     assert recovered["healthy"]
     old = {"last_queue_error": "database is locked", "last_queue_error_at": NOW - 60}
     assert report(stats(sender={"last_success_at": NOW - 100, **old}), LIMITS, NOW)["healthy"]
+
+
+def test_status_names_what_is_wrong_with_a_silent_topic() -> None:
+    from phytrace_edge.cli.status import render_status
+
+    topics = {
+        "/scan": {"received": 0, "rate_hz": 0.0, "publishers": 1, "qos_incompatible": 2},
+        "/gps/fix": {"received": 0, "rate_hz": 0.0, "publishers": 0},
+        "/acme/drive": {"received": 0, "rate_hz": 0.0, "type_unknown": "acme_msgs/msg/Drive"},
+        "/rosout": {"received": 40, "rate_hz": 1.0, "records": 12, "suppressed": 28},
+    }
+    text = render_status(report(stats(topics=topics), LIMITS, NOW))
+    lines = {line.split()[0]: line for line in text.splitlines() if line.startswith("  /")}
+    assert lines["/scan"].endswith("0 received, QoS incompatible with 2 publisher(s)")
+    assert lines["/gps/fix"].endswith("0 received, no publisher")
+    assert "type acme_msgs/msg/Drive not installed here" in lines["/acme/drive"]
+    assert lines["/rosout"].endswith("12 log records, 28 held back")

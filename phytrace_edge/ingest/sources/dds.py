@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import Counter
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -75,6 +76,7 @@ class DdsReaders:
         try:
             from cyclonedds.core import Listener, Policy, Qos
             from cyclonedds.domain import Domain, DomainParticipant
+            from cyclonedds.internal import InvalidSample
             from cyclonedds.sub import DataReader
             from cyclonedds.topic import Topic
 
@@ -90,6 +92,8 @@ class DdsReaders:
         self.readers: list[Any] = []
         self.latest_readers: list[tuple[str, Any]] = []
         self.skipped: dict[str, str] = {}
+        self.without_data: Counter[str] = Counter()
+        self._invalid_sample = InvalidSample
 
         def qos(depth: int) -> Any:
             return Qos(
@@ -113,8 +117,7 @@ class DdsReaders:
             if spec.every_message:
 
                 def deliver(reader: Any, name: str = canonical) -> None:
-                    for sample in reader.take(N=READER_DEPTH):
-                        on_message(name, sample)
+                    self._hand_over(name, reader.take(N=READER_DEPTH))
 
                 reader = DataReader(
                     self.participant,
@@ -152,7 +155,16 @@ class DdsReaders:
     def take_latest(self) -> None:
         """Hand over the newest sample of each state topic, if one came since last time."""
         for name, reader in self.latest_readers:
-            for sample in reader.take(N=1):
+            self._hand_over(name, reader.take(N=1))
+
+    def _hand_over(self, name: str, samples: list[Any]) -> None:
+        """Samples with data to ``on_message``; those without (a writer that went away
+        disposed or unregistered its instance) are only counted: they are no message,
+        and a topic goes stale by its age, not by its publisher leaving."""
+        for sample in samples:
+            if isinstance(sample, self._invalid_sample):
+                self.without_data[name] += 1
+            else:
                 self._on_message(name, sample)
 
     def close(self) -> None:
@@ -205,5 +217,11 @@ class DdsSource:
         return self._field_types(msg)
 
     def topic_stats(self) -> dict[str, dict[str, Any]]:
-        skipped = self._readers.skipped if self._readers else {}
-        return {name: {"skipped": reason} for name, reason in skipped.items()}
+        if self._readers is None:
+            return {}
+        stats: dict[str, dict[str, Any]] = {
+            name: {"without_data": count} for name, count in self._readers.without_data.items()
+        }
+        for name, reason in self._readers.skipped.items():
+            stats[name] = {"skipped": reason}
+        return stats

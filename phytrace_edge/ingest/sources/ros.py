@@ -48,6 +48,22 @@ def load_rclpy() -> RosApi:
     return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events)
 
 
+def import_error_message(exc: ImportError) -> str:
+    """What to do about rclpy failing to import: ROS 2 not sourced, or (the import
+    itself says so) something rclpy needs is missing from this Python."""
+    if exc.name in ("rclpy", None) and "rclpy" in str(exc):
+        return (
+            "BRIDGE_INPUT='ros': rclpy is not importable - source ROS 2 first "
+            "(source /opt/ros/jazzy/setup.bash), or use --input dds, sim or bag:PATH"
+        )
+    return (
+        f"BRIDGE_INPUT='ros': rclpy did not import ({type(exc).__name__}: {exc}) - ROS 2 is "
+        "sourced, but this Python lacks what rclpy needs: run the bridge with the "
+        "distribution's python3, or a venv made with --system-site-packages (and pip "
+        "install what the message names)"
+    )
+
+
 class RosSource:
     """Subscriptions to the robot's topics on an rclpy node, spun on the ingest thread."""
 
@@ -60,11 +76,8 @@ class RosSource:
             self._api = load_rclpy()
             self._rclpy = importlib.import_module("rclpy")
             self._executors = importlib.import_module("rclpy.executors")
-        except ImportError:
-            raise ConfigError(
-                "BRIDGE_INPUT='ros': rclpy is not importable - source ROS 2 first "
-                "(source /opt/ros/jazzy/setup.bash), or use --input dds, sim or bag:PATH"
-            ) from None
+        except ImportError as exc:
+            raise ConfigError(import_error_message(exc)) from None
         self._node: Any = None
         self._executor: Any = None
         self._subscriber: TopicSubscriber | None = None
