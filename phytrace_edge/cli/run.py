@@ -15,6 +15,7 @@ if TYPE_CHECKING:
 
 WATCHDOG_IDLE_S = 5.0
 POLL_S = 0.2
+DUPLICATE_SIGNAL_S = 1.0  # a second signal sooner is the first one delivered twice
 
 
 NAME = "run"
@@ -31,7 +32,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
-    """Run the bridge until SIGTERM or SIGINT; a second signal exits at once."""
+    """Run the bridge until SIGTERM or SIGINT; a second signal exits at once, unless it
+    follows the first within DUPLICATE_SIGNAL_S: a Ctrl-C in the terminal of ``ros2
+    launch`` reaches the bridge itself and again as launch forwards it."""
     import logging
     import signal
     import threading
@@ -40,10 +43,14 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
     log = logging.getLogger("phytrace_edge")
     stop = threading.Event()
+    first_signal_at: list[float] = []
 
     def on_signal(signum: int, frame: object) -> None:
-        if stop.is_set():
+        if first_signal_at:
+            if time.monotonic() - first_signal_at[0] < DUPLICATE_SIGNAL_S:
+                return  # the same request twice (Ctrl-C under ros2 launch)
             os._exit(128 + signum)  # the queue is crash-safe: nothing committed is lost
+        first_signal_at.append(time.monotonic())
         log.info("received %s: stopping (again to exit at once)", signal.Signals(signum).name)
         stop.set()
 

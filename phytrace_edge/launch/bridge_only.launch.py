@@ -9,7 +9,7 @@ environment to phycloud_api_key:=...: process arguments are visible to every use
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 
 # the reference guide's launch parameters, with their defaults ("" = not set)
@@ -26,21 +26,36 @@ ARGUMENTS = {
 BRIDGE_INPUT = "ros"
 
 
-def bridge_command(bridge_input: str) -> list:
-    """``phytrace-edge run`` with every argument passed as ``-p name:=value``."""
+def bridge_command(bridge_input: str, values: dict) -> list:
+    """``phytrace-edge run`` with each argument that was given as ``-p name:=value``. An
+    unset one is left out: rcl refuses an empty ``-p name:=`` and the bridge would not
+    start, so any subset of the arguments works."""
     parameters = []
     for name in ARGUMENTS:
-        parameters += ["-p", [name, ":=", LaunchConfiguration(name)]]
-    return ["phytrace-edge", "run", "--input", bridge_input, "--ros-args", *parameters]
+        if values.get(name):
+            parameters += ["-p", f"{name}:={values[name]}"]
+    command = ["phytrace-edge", "run", "--input", bridge_input]
+    return command + (["--ros-args", *parameters] if parameters else [])
 
 
-def generate_launch_description() -> LaunchDescription:
+def bridge_process(context, bridge_input: str) -> list:
+    """The bridge's process, built once the arguments' values are known."""
+    values = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
+    command = bridge_command(bridge_input, values)
+    return [ExecuteProcess(cmd=command, output="screen", sigterm_timeout="20")]
+
+
+def launch_description(bridge_input: str) -> LaunchDescription:
     return LaunchDescription(
         [
             *(
                 DeclareLaunchArgument(name, default_value=default, description=doc)
                 for name, (default, doc) in ARGUMENTS.items()
             ),
-            ExecuteProcess(cmd=bridge_command(BRIDGE_INPUT), output="screen", sigterm_timeout="20"),
+            OpaqueFunction(function=bridge_process, args=[bridge_input]),
         ]
     )
+
+
+def generate_launch_description() -> LaunchDescription:
+    return launch_description(BRIDGE_INPUT)

@@ -11,7 +11,6 @@ import importlib.util
 from pathlib import Path
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
 
 _spec = importlib.util.spec_from_file_location(
     "bridge_only", Path(__file__).with_name("bridge_only.launch.py")
@@ -21,14 +20,4 @@ _spec.loader.exec_module(bridge_only)
 
 
 def generate_launch_description() -> LaunchDescription:
-    return LaunchDescription(
-        [
-            *(
-                DeclareLaunchArgument(name, default_value=default, description=doc)
-                for name, (default, doc) in bridge_only.ARGUMENTS.items()
-            ),
-            ExecuteProcess(
-                cmd=bridge_only.bridge_command("sim"), output="screen", sigterm_timeout="20"
-            ),
-        ]
-    )
+    return bridge_only.launch_description("sim")

@@ -15,6 +15,7 @@ import httpx
 import orjson
 import pytest
 
+from phytrace_edge.cli.run import DUPLICATE_SIGNAL_S
 from tests.processes import BridgeProcess, free_port, run_cli, status_json, wait_for
 
 SECRET = "phk_live_never_print_me"
@@ -183,7 +184,12 @@ def test_a_second_signal_exits_at_once_and_the_queue_stays_sound(
     wait_for(lambda: "phytrace-edge 0.1" in log.read_text(), 30, "start-up")
     wait_for(lambda: status(env)[1].get("queue", {}).get("depth", 0) > 5, 30, "queued events")
     bridge.signal(signal.SIGTERM)
+    first = time.monotonic()
+    bridge.signal(signal.SIGTERM)  # the same request twice (Ctrl-C under ros2 launch)
     wait_for(lambda: "stopping (again to exit at once)" in log.read_text(), 10, "first signal")
+    assert bridge.process.poll() is None  # still flushing: the duplicate was ignored
+    # a second request, once the duplicate window has passed, exits at once
+    wait_for(lambda: time.monotonic() - first > DUPLICATE_SIGNAL_S, 10, "the window to pass")
     started = time.monotonic()
     bridge.signal(signal.SIGTERM)
     code = bridge.wait(timeout=10)

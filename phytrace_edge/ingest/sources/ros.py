@@ -84,7 +84,14 @@ class RosSource:
 
     def start(self, feed: Feed) -> None:
         ros_args = self._options.ros_args
-        self._rclpy.init(args=["phytrace-edge", *(("--ros-args", *ros_args) if ros_args else ())])
+        # the bridge owns SIGINT and SIGTERM: it stops ingest, then the queue, then
+        # ship, in order; rclpy's own handlers would shut the context down under the
+        # executor (ExternalShutdownException on every stop)
+        signals = importlib.import_module("rclpy.signals")
+        self._rclpy.init(
+            args=["phytrace-edge", *(("--ros-args", *ros_args) if ros_args else ())],
+            signal_handler_options=signals.SignalHandlerOptions.NO,
+        )
         self._node = self._api.create_node(NODE_NAME)
         self._subscriber = subscribe_topics(
             self._api,
