@@ -89,10 +89,28 @@ def source_options(
         bag_path=bag_path,
         replay_rate=s.replay_rate,
         ros_args=tuple(ros_args),
+        parameters=ros_parameter_values(s) if kind == "ros" else {},
         dds_domain_id=domain_id,
         dds_localhost_only=localhost_only,
         **simulator,
     )
+
+
+def ros_parameter_values(s: Settings) -> dict[str, tuple[Any, str]]:
+    """Every setting that has a value, as a ROS parameter (name -> (value, its doc
+    line)), for ``ros2 param list/get``; never the API key. A value ROS has no type
+    for (a table, a set) is given as text."""
+    from phytrace_edge.config import setting_infos
+
+    parameters: dict[str, tuple[Any, str]] = {}
+    for info in setting_infos():
+        value = getattr(s, info.key)
+        if info.key == "phycloud_api_key" or value is None or value in ((), frozenset(), {}):
+            continue
+        if not isinstance(value, (bool, int, float, str)):
+            value = str(value)
+        parameters[info.key] = (value, info.doc)
+    return parameters
 
 
 def queue_path(s: Settings) -> str:

@@ -340,3 +340,40 @@ def test_a_bad_env_file_is_one_line(tmp_path: Path) -> None:
         settings_from_environment(None, {}, env_file=str(env_file))
     with pytest.raises(ConfigError, match=r"env file .*missing\.env: not found"):
         settings_from_environment(None, {}, env_file=str(tmp_path / "missing.env"))
+
+
+def test_a_params_file_and_p_flags_apply_in_order(tmp_path: Path) -> None:
+    from phytrace_edge.config import ros_parameters
+
+    shipped = Path(__file__).parents[2] / "phytrace_edge" / "launch" / "phytrace_edge.params.yaml"
+    other = tmp_path / "other.yaml"
+    other.write_text("other_node:\n  ros__parameters:\n    source_id: not-ours\n")
+    params = ros_parameters(
+        ["-p", "source_id:=overridden", "--params-file", str(shipped), "--params-file",
+         str(other), "-p", "sample_rate_hz:=7.5"]
+    )  # fmt: skip
+    assert params["source_id"] == "warehouse-amr-07"  # the file came after the -p
+    assert params["sample_rate_hz"] == "7.5"  # and this -p after the file
+    assert params["use_sim_time"] is False  # from /**
+    loaded = settings_from_environment(None, {}, ros_params=params)
+    assert loaded.settings.source_type == "amr" and loaded.settings.sample_rate_hz == 7.5
+    assert loaded.settings.topics_extra[0].mode == "on_change"
+    assert loaded.origins["fleet_id"] == "ros param"
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("phytrace_edge: [1, 2]\n", "has no ros__parameters mapping"),
+        ("- a\n- b\n", "not a mapping of node names"),
+        ("a: [unclosed\n", "not valid YAML"),
+    ],
+)
+def test_a_bad_params_file_is_one_line(tmp_path: Path, text: str, says: str) -> None:
+    from phytrace_edge.config import ros_parameters
+
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=says) as caught:
+        ros_parameters(["--params-file", str(path)])
+    assert "\n" not in str(caught.value)

@@ -31,6 +31,8 @@ class SourceOptions:
     bag_path: str = ""
     replay_rate: float = DEFAULT_REPLAY_RATE
     ros_args: tuple[str, ...] = ()  # after --ros-args: remaps, log levels, parameters
+    # the effective settings, declared read-only on the rclpy node: name -> (value, doc)
+    parameters: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
     dds_domain_id: int = 0
     dds_localhost_only: bool = False
     seed: int = 0  # of the simulated world

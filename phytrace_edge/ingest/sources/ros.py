@@ -64,6 +64,18 @@ def import_error_message(exc: ImportError) -> str:
     )
 
 
+def declare_settings(node: Any, parameters: Mapping[str, tuple[Any, str]]) -> None:
+    """The bridge's effective settings as read-only parameters of its node, so
+    ``ros2 param list/get /phytrace_edge`` shows what it runs with (a change needs a
+    restart: settings are read once, at start)."""
+    descriptor_class = importlib.import_module("rcl_interfaces.msg").ParameterDescriptor
+    for name, (value, doc) in parameters.items():
+        if node.has_parameter(name):  # use_sim_time: rclpy declares it itself
+            continue
+        descriptor = descriptor_class(description=doc, read_only=True, dynamic_typing=True)
+        node.declare_parameter(name, value, descriptor)
+
+
 class RosSource:
     """Subscriptions to the robot's topics on an rclpy node, spun on the ingest thread."""
 
@@ -93,6 +105,7 @@ class RosSource:
             signal_handler_options=signals.SignalHandlerOptions.NO,
         )
         self._node = self._api.create_node(NODE_NAME)
+        declare_settings(self._node, self._options.parameters)
         self._subscriber = subscribe_topics(
             self._api,
             self._node,
