@@ -21,7 +21,8 @@ from phytrace_edge.sim.mock_ros.runtime import SubscriptionEventCallbacks
 
 @pytest.fixture
 def context() -> mock_ros.Context:
-    ctx = mock_ros.Context(virtual_time=True)
+    # instant discovery: these tests are about other things (discovery has its own)
+    ctx = mock_ros.Context(virtual_time=True, discovery_latency_s=0.0)
     mock_ros.init(context=ctx)
     yield ctx
     mock_ros.shutdown(context=ctx)
@@ -101,6 +102,25 @@ def test_reliable_subscription_gets_nothing_from_best_effort_publisher(
     _spin_until_idle(context, node)
     assert [msg.data for msg in received] == ["hello"]  # only the best-effort reader
     assert len(events) == 1 and events[0].last_policy_kind == QoSPolicyKind.RELIABILITY
+
+
+def test_discovery_takes_time_and_what_is_published_before_is_lost() -> None:
+    context = mock_ros.Context(virtual_time=True, discovery_latency_s=0.2)
+    mock_ros.init(context=context)
+    try:
+        node = mock_ros.create_node("n", context=context)
+        received: list = []
+        node.create_subscription(m.String, "/t", received.append, 10)
+        publisher = node.create_publisher(m.String, "/t", 10)
+        publisher.publish(m.String(data="too early"))
+        assert node.get_publishers_info_by_topic("/t") == []  # not discovered yet
+        _spin_until_idle(context, node, seconds=0.3)
+        assert len(node.get_publishers_info_by_topic("/t")) == 1
+        publisher.publish(m.String(data="matched"))
+        _spin_until_idle(context, node, seconds=0.1)
+        assert [msg.data for msg in received] == ["matched"]
+    finally:
+        mock_ros.shutdown(context=context)
 
 
 def test_subscriber_gets_a_copy(context: mock_ros.Context) -> None:

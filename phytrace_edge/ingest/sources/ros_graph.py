@@ -21,6 +21,7 @@ log = logging.getLogger(__name__)
 SAMPLED_QUEUE_DEPTH = 5
 EVERY_MESSAGE_QUEUE_DEPTH = 100
 GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
+ANY_PUBLISHER = QosChoice(reliable=False, transient_local=False)
 OnMessage = Callable[[str, Any], None]
 
 
@@ -82,11 +83,13 @@ def wanted_topics(
 class TopicSubscriber:
     """One subscription per enabled topic, matched to what its publishers offer.
 
-    ``refresh`` (at start and then periodically) subscribes topics whose publishers
-    appeared since, and re-creates a subscription when a new publisher would be
-    incompatible with it; topics with no publisher are skipped. A per-topic override
-    (TOPIC_QOS) replaces the matching. Incompatible-QoS events are counted per topic,
-    and so is a type this machine has no message class for (an extra topic's).
+    ``refresh`` (at start and then periodically) subscribes every topic at once (best
+    effort and volatile while no publisher is known: that matches any), and re-creates
+    a subscription when its publishers need another QoS (reliable, transient local: a
+    latched goal) or another type; an extra topic with no type given waits for one. A
+    per-topic override (TOPIC_QOS) replaces the matching. Incompatible-QoS events are
+    counted per topic, and so is a type this machine has no message class for (an
+    extra topic's).
     """
 
     def __init__(
@@ -113,20 +116,30 @@ class TopicSubscriber:
                 if not wanted.types or info.topic_type in wanted.types
             ]
             self.publishers[canonical] = len(publishers)
-            if not publishers or canonical in self.type_unknown:
-                continue
-            choice = self._overrides.get(canonical) or matching_qos(
-                [
-                    (
-                        info.qos_profile.reliability == self._api.qos.ReliabilityPolicy.RELIABLE,
-                        info.qos_profile.durability
-                        == self._api.qos.DurabilityPolicy.TRANSIENT_LOCAL,
-                    )
-                    for info in publishers
-                ]
-            )
-            type_name = publishers[0].topic_type
             current = self.subscribed.get(canonical)
+            if canonical in self.type_unknown:
+                continue
+            if publishers:
+                choice = self._overrides.get(canonical) or matching_qos(
+                    [
+                        (
+                            info.qos_profile.reliability
+                            == self._api.qos.ReliabilityPolicy.RELIABLE,
+                            info.qos_profile.durability
+                            == self._api.qos.DurabilityPolicy.TRANSIENT_LOCAL,
+                        )
+                        for info in publishers
+                    ]
+                )
+                type_name = publishers[0].topic_type
+            elif current is None and wanted.types:
+                # nobody seen yet: listen from now on anyway, best effort and volatile,
+                # which matches every publisher, so nothing published before the next
+                # look at the graph is lost (a one-shot diagnostics ERROR)
+                choice = self._overrides.get(canonical) or ANY_PUBLISHER
+                type_name = wanted.types[0]
+            else:
+                continue
             if current is not None and current[1:] == (choice, type_name):
                 continue
             try:

@@ -38,14 +38,30 @@ from phytrace_edge.sim.mock_ros.qos import (
     incompatible_policy,
 )
 
+# Discovery is not instant in DDS: a new publisher shows in the graph, and its
+# messages reach a subscription, only once the two have found each other; what it
+# publishes before is lost to that subscription (a volatile one).
+DISCOVERY_LATENCY_S = 0.05
+
 
 class Context:
     """One ROS domain: its graph, its time source and the condition executors wait on."""
 
-    def __init__(self, *, virtual_time: bool = False, start_system_ns: int | None = None) -> None:
+    def discovered(self, *created_ns: int) -> bool:
+        """Whether endpoints created at ``created_ns`` have found each other by now."""
+        return self.time_source.steady_ns() >= max(created_ns) + self.discovery_latency_ns
+
+    def __init__(
+        self,
+        *,
+        virtual_time: bool = False,
+        start_system_ns: int | None = None,
+        discovery_latency_s: float = DISCOVERY_LATENCY_S,
+    ) -> None:
         self.time_source: TimeSource = (
             VirtualTimeSource(start_system_ns) if virtual_time else RealTimeSource()
         )
+        self.discovery_latency_ns = int(discovery_latency_s * 1e9)
         self.condition = threading.Condition()
         self.publishers: list[Publisher] = []
         self.subscriptions: list[Subscription] = []
@@ -113,6 +129,7 @@ class Publisher:
     def __init__(self, node: Node, msg_type: type[Message], topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
         self._history: deque[Any] = deque(maxlen=qos.depth)
+        self.created_ns = node.context.time_source.steady_ns()
 
     def publish(self, msg: Any) -> None:
         if not isinstance(msg, self.msg_type):
@@ -122,7 +139,9 @@ class Publisher:
             if self.qos_profile.durability.name == "TRANSIENT_LOCAL":
                 self._history.append(wire_copy(msg))
             for subscription in context.subscriptions:
-                if subscription.matches_topic(self):
+                if subscription.matches_topic(self) and context.discovered(
+                    self.created_ns, subscription.created_ns
+                ):
                     subscription.offer(self, msg)
             context.condition.notify_all()
 
@@ -146,6 +165,7 @@ class Subscription:
         self.incompatible = QoSRequestedIncompatibleQoSInfo()
         self.pending_events: list[QoSRequestedIncompatibleQoSInfo] = []
         self._incompatible_with: set[int] = set()
+        self.created_ns = node.context.time_source.steady_ns()
 
     def matches_topic(self, publisher: Publisher) -> bool:
         return publisher.topic_name == self.topic_name and _type_name(
@@ -315,7 +335,7 @@ class Node:
                     copy.copy(p.qos_profile),
                 )
                 for p in self.context.publishers
-                if p.topic_name == topic_name
+                if p.topic_name == topic_name and self.context.discovered(p.created_ns)
             ]
 
 
