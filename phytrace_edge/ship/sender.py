@@ -145,6 +145,7 @@ class Sender:
                             return
                         else:  # nothing due, or another process holds what is left
                             self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
+                            self._beat()  # idle is alive: a quiet robot is no stalled sender
                         continue
                     # while requests fail, one at a time: an outage is not hit twice as often
                     limit = 1 if self._lanes.failing else self.policy.requests_in_flight

@@ -22,9 +22,10 @@ from phytrace_edge.units import MIB
 
 @pytest.fixture(scope="module")
 def sim_events() -> list[dict]:
+    """The simulated robot's periodic events (the tests change their domains)."""
     events: list[dict] = []
     run_simulation(600, sink=events.append, seed=5)
-    return events
+    return [event for event in events if event["event_type"] == "telemetry.periodic"]
 
 
 @pytest.fixture

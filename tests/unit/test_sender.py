@@ -25,6 +25,7 @@ from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import FunctionTransport, HttpTransport
 from phytrace_edge.units import MIB
+from tests.processes import wait_for
 
 
 class FakeCloud:
@@ -374,3 +375,18 @@ def test_a_drain_deadline_cuts_short_a_batch_that_keeps_retrying(store) -> None:
     assert time.monotonic() - started < 5
     assert store.stats().depth == 5 and store.stats().leased == 0  # released, not lost
     assert s.stats.retries > 0
+
+
+def test_an_idle_sender_still_says_it_is_alive(store) -> None:
+    """Nothing to send (a quiet robot, every topic silent) is no stall: the sender beats
+    while idle, or status and the systemd watchdog would take it for hung."""
+    beats: list[float] = []
+    s = sender(store, FakeCloud(), flush_interval_s=0.05)
+    worker = threading.Thread(target=s.run, args=(lambda: beats.append(time.monotonic()),))
+    worker.start()
+    try:
+        wait_for(lambda: len(beats) >= 3, 10, "the idle sender's beats")
+    finally:
+        s.stop.set()
+        worker.join(timeout=10)
+    assert len(beats) >= 3 and store.counter("depth") == 0
