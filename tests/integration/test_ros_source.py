@@ -46,15 +46,22 @@ class Graph:
         builder = UDMBuilder(wiring.builder_options(settings), clock=NodeClock(self.api))
         self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
         node = self.api.create_node("phytrace_edge")
+        # as the ros input does: state streams on a node no executor spins, taken at
+        # the tick
+        sampling = self.api.create_node("phytrace_edge_sampling")
         self.subscriber = subscribe_topics(
             self.api,
             node,
             wanted_topics(dict(options.topics), dict(options.extra_topics)),
             self.dispatcher.on_message,
             dict(options.qos_overrides),
+            sampling_node=sampling,
         )
         sampler = Sampler(
-            builder, lambda built: self.events.append(built.event), settings.sample_rate_hz
+            builder,
+            lambda built: self.events.append(built.event),
+            settings.sample_rate_hz,
+            before_tick=self.subscriber.take_latest,
         )
         node.create_timer(sampler.period_s, sampler.tick, clock=self.api.clock("steady"))
         self.executor = mock_ros.SingleThreadedExecutor(self.context, [self.robot, node])
@@ -260,3 +267,30 @@ def test_an_rclpy_that_fails_to_import_says_why() -> None:
     assert "No module named 'yaml'" in missing and "source ROS 2 first" not in missing
     broken = import_error_message(ImportError("libyaml.so: cannot open shared object file"))
     assert "libyaml.so" in broken
+
+
+def test_state_streams_are_taken_at_the_tick_not_called_back(graph) -> None:
+    """Odometry at 50 Hz into a 5 Hz sample tick: no callback per message, the newest
+    message taken at each tick; diagnostics (every message counts) still called back."""
+    g = graph(SAMPLE_RATE_HZ="5")
+    odometry = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    diagnostics = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
+    g.run(GRAPH_CHECK_S + 0.1)
+    ticks_before = len(g.events)
+    for i in range(50):  # faster than the tick: several messages between two ticks
+        odometry.publish(odom(float(i)))
+        diagnostics.publish(m.DiagnosticArray())
+        g.run(0.02)
+    ticks = len(g.events) - ticks_before
+    assert g.received("/diagnostics") == 50
+    assert ticks < 25 and abs(g.received("/odom") - ticks) <= 1  # one per tick, no more
+    assert g.events[-1]["location"]["local"]["x_m"] >= 48.0  # the newest at that tick
+
+
+def test_an_incompatible_state_stream_is_counted_from_the_graph(graph) -> None:
+    """The sampling node runs no event handlers: its QoS problems are read off the
+    graph (a reliable request meets a best-effort lidar)."""
+    g = graph(TOPIC_QOS="/scan=reliable")
+    g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    assert g.subscriber.stats()["/scan"]["qos_incompatible"] == 1

@@ -45,7 +45,14 @@ def load_rclpy() -> RosApi:
     def subscription_events(on_incompatible: Callable[[Any], None]) -> Any:
         return events.SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
 
-    return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events)
+    def take(subscription: Any) -> Any:
+        """The newest message waiting on a subscription no executor spins (what the
+        executor itself does before it calls a callback), or None."""
+        with subscription.handle:
+            taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+        return None if taken is None else taken[0]
+
+    return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events, take)
 
 
 def import_error_message(exc: ImportError) -> str:
@@ -91,6 +98,7 @@ class RosSource:
         except ImportError as exc:
             raise ConfigError(import_error_message(exc)) from None
         self._node: Any = None
+        self._sampling_node: Any = None
         self._executor: Any = None
         self._subscriber: TopicSubscriber | None = None
 
@@ -106,12 +114,16 @@ class RosSource:
         )
         self._node = self._api.create_node(NODE_NAME)
         declare_settings(self._node, self._options.parameters)
+        # state streams (odometry, IMU, scan, ...) are taken at the sample tick from a
+        # node no executor spins: no Python callback for each of their messages
+        self._sampling_node = self._api.create_node(f"{NODE_NAME}_sampling")
         self._subscriber = subscribe_topics(
             self._api,
             self._node,
             wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
             feed.on_message,
             dict(self._options.qos_overrides),
+            sampling_node=self._sampling_node,
         )
         self._executor = self._executors.SingleThreadedExecutor()
         self._executor.add_node(self._node)
@@ -125,11 +137,13 @@ class RosSource:
         return rosidl_field_types(msg)
 
     def before_tick(self) -> None:
-        """Messages arrive through callbacks: nothing to take at the tick."""
+        if self._subscriber is not None:
+            self._subscriber.take_latest()
 
     def stop(self) -> None:
-        if self._node is not None:
-            self._node.destroy_node()
+        for node in (self._node, self._sampling_node):
+            if node is not None:
+                node.destroy_node()
         self._rclpy.try_shutdown()
 
     def finished(self) -> Finished | None:

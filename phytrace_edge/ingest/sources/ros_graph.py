@@ -8,6 +8,7 @@ simulator and the tests use (``sources/sim.py``).
 from __future__ import annotations
 
 import logging
+import threading
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,6 +35,7 @@ class RosApi:
     qos: Any  # the rclpy.qos module: QoSProfile and the policy enums
     clock: Callable[[str], Any]  # "steady" or "system" -> an rclpy Clock
     subscription_events: Callable[[Callable[[Any], None]], Any]  # incompatible-QoS callback
+    take: Callable[[Any], Any] = lambda subscription: None  # its newest message, or None
 
 
 class NodeClock:
@@ -58,6 +60,7 @@ class Wanted:
     actual: str
     types: tuple[str, ...]
     depth: int
+    sampled: bool = False  # a state stream: only its latest message counts
 
 
 def wanted_topics(
@@ -72,11 +75,13 @@ def wanted_topics(
             EVERY_MESSAGE_QUEUE_DEPTH
             if TOPIC_BY_NAME[canonical].every_message
             else SAMPLED_QUEUE_DEPTH,
+            sampled=not TOPIC_BY_NAME[canonical].every_message,
         )
         for canonical, actual in topics.items()
     }
     for name, (actual, type_name) in (extras or {}).items():
-        wanted[name] = Wanted(actual, (type_name,) if type_name else (), SAMPLED_QUEUE_DEPTH)
+        types = (type_name,) if type_name else ()
+        wanted[name] = Wanted(actual, types, SAMPLED_QUEUE_DEPTH, sampled=True)
     return wanted
 
 
@@ -99,8 +104,11 @@ class TopicSubscriber:
         topics: dict[str, Wanted],
         on_message: OnMessage,
         overrides: dict[str, QosChoice] | None = None,
+        sampling_node: Any = None,
     ) -> None:
         self._api, self._node, self._topics = api, node, topics
+        self._sampling_node = sampling_node
+        self._lock = threading.Lock()
         self._on_message = on_message
         self._overrides = overrides or {}
         self.subscribed: dict[str, tuple[Any, QosChoice, str]] = {}
@@ -109,6 +117,10 @@ class TopicSubscriber:
         self.type_unknown: dict[str, str] = {}
 
     def refresh(self) -> None:
+        with self._lock:  # the sampler's take_latest uses the same subscriptions
+            self._refresh()
+
+    def _refresh(self) -> None:
         for canonical, wanted in self._topics.items():
             publishers = [
                 info
@@ -119,19 +131,18 @@ class TopicSubscriber:
             current = self.subscribed.get(canonical)
             if canonical in self.type_unknown:
                 continue
-            if publishers:
-                choice = self._overrides.get(canonical) or matching_qos(
-                    [
-                        (
-                            info.qos_profile.reliability
-                            == self._api.qos.ReliabilityPolicy.RELIABLE,
-                            info.qos_profile.durability
-                            == self._api.qos.DurabilityPolicy.TRANSIENT_LOCAL,
-                        )
-                        for info in publishers
-                    ]
+            offered = [
+                (
+                    info.qos_profile.reliability == self._api.qos.ReliabilityPolicy.RELIABLE,
+                    info.qos_profile.durability == self._api.qos.DurabilityPolicy.TRANSIENT_LOCAL,
                 )
+                for info in publishers
+            ]
+            if publishers:
+                choice = self._overrides.get(canonical) or matching_qos(offered)
                 type_name = publishers[0].topic_type
+                if self._node_of(wanted) is not self._node:  # no executor runs its events
+                    self._count_incompatible(canonical, choice, offered)
             elif current is None and wanted.types:
                 # nobody seen yet: listen from now on anyway, best effort and volatile,
                 # which matches every publisher, so nothing published before the next
@@ -151,7 +162,7 @@ class TopicSubscriber:
                 )
                 continue
             if current is not None:
-                self._node.destroy_subscription(current[0])
+                self._node_of(wanted).destroy_subscription(current[0])
             self.subscribed[canonical] = (
                 self._subscribe(canonical, wanted, message_class, choice),
                 choice,
@@ -184,12 +195,51 @@ class TopicSubscriber:
             for canonical in self._topics
         }
 
+    def _count_incompatible(
+        self, canonical: str, choice: QosChoice, offered: list[tuple[bool, bool]]
+    ) -> None:
+        """Publishers the subscription cannot match, read off the graph (a reliable or
+        transient-local request meets a best-effort or volatile offer)."""
+        count = sum(
+            (choice.reliable and not reliable) or (choice.transient_local and not latched)
+            for reliable, latched in offered
+        )
+        if count > self.qos_incompatible[canonical]:
+            log.warning(
+                "%s: %d publisher(s)' QoS incompatible with the subscription (%s)",
+                canonical,
+                count,
+                choice.describe(),
+            )
+            self.qos_incompatible[canonical] = count
+
+    def take_latest(self) -> None:
+        """Hand over the newest message of each sampled topic, if one came since the
+        last tick (they sit on the sampling node, which no executor spins)."""
+        taken = []
+        with self._lock:
+            for canonical, wanted in self._topics.items():
+                current = self.subscribed.get(canonical)
+                if current is not None and self._node_of(wanted) is not self._node:
+                    taken.append((canonical, self._api.take(current[0])))
+        for canonical, msg in taken:
+            if msg is not None:
+                self._on_message(canonical, msg)
+
+    def _node_of(self, wanted: Wanted) -> Any:
+        """State streams go to the sampling node when there is one: no callback (and no
+        Python) per message, only a take at the tick."""
+        if wanted.sampled and self._sampling_node is not None:
+            return self._sampling_node
+        return self._node
+
     def _subscribe(
         self, canonical: str, wanted: Wanted, message_class: type, choice: QosChoice
     ) -> Any:
         qos = self._api.qos
+        sampled = self._node_of(wanted) is not self._node
         profile = qos.QoSProfile(
-            depth=wanted.depth,
+            depth=1 if sampled else wanted.depth,
             reliability=qos.ReliabilityPolicy.RELIABLE
             if choice.reliable
             else qos.ReliabilityPolicy.BEST_EFFORT,
@@ -209,10 +259,10 @@ class TopicSubscriber:
                 choice.describe(),
             )
 
-        return self._node.create_subscription(
+        return self._node_of(wanted).create_subscription(
             message_class,
             wanted.actual,
-            on_message,
+            (lambda msg: None) if sampled else on_message,  # taken at the tick instead
             profile,
             event_callbacks=self._api.subscription_events(on_incompatible),
         )
@@ -224,10 +274,11 @@ def subscribe_topics(
     topics: dict[str, Wanted],
     on_message: OnMessage,
     overrides: dict[str, QosChoice] | None = None,
+    sampling_node: Any = None,
 ) -> TopicSubscriber:
-    """Subscribe ``node`` to the topics that have publishers now, and look again every
-    GRAPH_CHECK_S for topics that appear later or publishers that need another QoS."""
-    subscriber = TopicSubscriber(api, node, topics, on_message, overrides)
+    """Subscribe ``node`` (state streams: ``sampling_node``, if given) to the topics,
+    and look again every GRAPH_CHECK_S for publishers that need another QoS."""
+    subscriber = TopicSubscriber(api, node, topics, on_message, overrides, sampling_node)
     subscriber.refresh()
     node.create_timer(GRAPH_CHECK_S, subscriber.refresh, clock=api.clock("steady"))
     return subscriber

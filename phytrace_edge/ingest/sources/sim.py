@@ -48,6 +48,7 @@ def mock_api(context: mock_ros.Context) -> RosApi:
         lambda on_incompatible: mock_ros.SubscriptionEventCallbacks(
             incompatible_qos=on_incompatible
         ),
+        lambda subscription: subscription.take(),
     )
 
 

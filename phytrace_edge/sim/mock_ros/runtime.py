@@ -167,6 +167,12 @@ class Subscription:
         self._incompatible_with: set[int] = set()
         self.created_ns = node.context.time_source.steady_ns()
 
+    def take(self) -> Any:
+        """The oldest message waiting, or None (what rclpy's take_message gives a
+        subscription no executor spins)."""
+        with self.node.context.condition:
+            return self.pending.popleft() if self.pending else None
+
     def matches_topic(self, publisher: Publisher) -> bool:
         return publisher.topic_name == self.topic_name and _type_name(
             publisher.msg_type
