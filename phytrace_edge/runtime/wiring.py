@@ -89,7 +89,7 @@ def source_options(
         bag_path=bag_path,
         replay_rate=s.replay_rate,
         ros_args=tuple(ros_args),
-        parameters=ros_parameter_values(s) if kind == "ros" else {},
+        parameters=ros_parameter_values(s) if kind in ("ros", "sim") else {},
         dds_domain_id=domain_id,
         dds_localhost_only=localhost_only,
         **simulator,

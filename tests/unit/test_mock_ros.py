@@ -190,3 +190,42 @@ def test_float32_fields_arrive_rounded_like_through_the_middleware(context) -> N
     _spin_until_idle(context, node)
     assert received[0].range_min == pytest.approx(0.12) and received[0].range_min != 0.12
     assert received[0].range_min == float(np.float32(0.12))
+
+
+def test_parameters_are_declared_before_they_are_read_as_in_rclpy(
+    context: mock_ros.Context,
+) -> None:
+    from phytrace_edge.sim.mock_ros.parameters import (
+        ParameterAlreadyDeclaredException,
+        ParameterNotDeclaredException,
+    )
+
+    node = mock_ros.create_node("n", context=context)
+    assert node.get_parameter("use_sim_time").value is False  # the node declares it
+    with pytest.raises(ParameterNotDeclaredException):
+        node.get_parameter("source_id")
+    node.declare_parameter("source_id", "amr-7")
+    assert node.get_parameter("source_id").value == "amr-7"
+    with pytest.raises(ParameterAlreadyDeclaredException):
+        node.declare_parameter("source_id", "again")
+
+
+def test_the_sim_input_declares_the_settings_read_only_without_the_key() -> None:
+    from phytrace_edge.config import load_settings
+    from phytrace_edge.ingest.sources.base import Feed
+    from phytrace_edge.ingest.sources.sim import SimSource
+    from phytrace_edge.runtime import wiring
+
+    settings = load_settings(
+        env={"SOURCE_ID": "amr-7", "SAMPLE_RATE_HZ": "2", "PHYCLOUD_API_KEY": "secret-key"}
+    ).settings
+    source = SimSource(wiring.source_options(settings.replace(bridge_input="sim"), {}))
+    source.start(Feed(lambda topic, msg: None, lambda at: True, 0.5))
+    try:
+        (node,) = [n for n in source._context.nodes if n.get_name() == "phytrace_edge"]
+        assert node.get_parameter("source_id").value == "amr-7"
+        assert node.get_parameter("sample_rate_hz").value == 2.0
+        assert node.get_parameter("source_id").descriptor.read_only
+        assert not node.has_parameter("phycloud_api_key")
+    finally:
+        source.stop()

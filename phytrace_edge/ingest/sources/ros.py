@@ -14,6 +14,7 @@ from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceO
 from phytrace_edge.ingest.sources.ros_graph import (
     RosApi,
     TopicSubscriber,
+    declare_settings,
     subscribe_topics,
     wanted_topics,
 )
@@ -52,7 +53,19 @@ def load_rclpy() -> RosApi:
             taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
         return None if taken is None else taken[0]
 
-    return RosApi(rclpy.create_node, message_type, qos, make_clock, subscription_events, take)
+    def parameter_descriptor(description: str) -> Any:
+        descriptor = importlib.import_module("rcl_interfaces.msg").ParameterDescriptor
+        return descriptor(description=description, read_only=True, dynamic_typing=True)
+
+    return RosApi(
+        rclpy.create_node,
+        message_type,
+        qos,
+        make_clock,
+        subscription_events,
+        take,
+        parameter_descriptor,
+    )
 
 
 def import_error_message(exc: ImportError) -> str:
@@ -69,18 +82,6 @@ def import_error_message(exc: ImportError) -> str:
         "distribution's python3, or a venv made with --system-site-packages (and pip "
         "install what the message names)"
     )
-
-
-def declare_settings(node: Any, parameters: Mapping[str, tuple[Any, str]]) -> None:
-    """The bridge's effective settings as read-only parameters of its node, so
-    ``ros2 param list/get /phytrace_edge`` shows what it runs with (a change needs a
-    restart: settings are read once, at start)."""
-    descriptor_class = importlib.import_module("rcl_interfaces.msg").ParameterDescriptor
-    for name, (value, doc) in parameters.items():
-        if node.has_parameter(name):  # use_sim_time: rclpy declares it itself
-            continue
-        descriptor = descriptor_class(description=doc, read_only=True, dynamic_typing=True)
-        node.declare_parameter(name, value, descriptor)
 
 
 class RosSource:
@@ -113,7 +114,7 @@ class RosSource:
             signal_handler_options=signals.SignalHandlerOptions.NO,
         )
         self._node = self._api.create_node(NODE_NAME)
-        declare_settings(self._node, self._options.parameters)
+        declare_settings(self._api, self._node, dict(self._options.parameters))
         # state streams (odometry, IMU, scan, ...) are taken at the sample tick from a
         # node no executor spins: no Python callback for each of their messages
         self._sampling_node = self._api.create_node(f"{NODE_NAME}_sampling")

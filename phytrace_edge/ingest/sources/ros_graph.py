@@ -36,6 +36,17 @@ class RosApi:
     clock: Callable[[str], Any]  # "steady" or "system" -> an rclpy Clock
     subscription_events: Callable[[Callable[[Any], None]], Any]  # incompatible-QoS callback
     take: Callable[[Any], Any] = lambda subscription: None  # its newest message, or None
+    # a read-only ParameterDescriptor with this description
+    parameter_descriptor: Callable[[str], Any] = lambda description: None
+
+
+def declare_settings(api: RosApi, node: Any, parameters: dict[str, tuple[Any, str]]) -> None:
+    """The bridge's effective settings as read-only parameters of its node, so
+    ``ros2 param list/get /phytrace_edge`` shows what it runs with (a change needs a
+    restart: settings are read once, at start)."""
+    for name, (value, doc) in parameters.items():
+        if not node.has_parameter(name):  # use_sim_time: the node declares it itself
+            node.declare_parameter(name, value, api.parameter_descriptor(doc))
 
 
 class NodeClock:

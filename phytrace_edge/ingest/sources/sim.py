@@ -18,6 +18,7 @@ from phytrace_edge.ingest.sources.ros_graph import (
     NodeClock,
     RosApi,
     TopicSubscriber,
+    declare_settings,
     subscribe_topics,
     wanted_topics,
 )
@@ -49,6 +50,9 @@ def mock_api(context: mock_ros.Context) -> RosApi:
             incompatible_qos=on_incompatible
         ),
         lambda subscription: subscription.take(),
+        lambda description: mock_ros.ParameterDescriptor(
+            description=description, read_only=True, dynamic_typing=True
+        ),
     )
 
 
@@ -72,6 +76,7 @@ class SimSource:
         self.robot = DeliveryRobot(robot_node, World.create(self._options.seed))
         robot_node.create_timer(1.0 / self.robot.tick_hz, self.robot.tick, clock=steady)
         node = api.create_node(NODE_NAME)
+        declare_settings(api, node, dict(self._options.parameters))
         self._subscriber = subscribe_topics(
             api,
             node,

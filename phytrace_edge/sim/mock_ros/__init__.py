@@ -12,6 +12,7 @@ from phytrace_edge.sim.mock_ros import qos
 from phytrace_edge.sim.mock_ros.clock import Clock, ClockType
 from phytrace_edge.sim.mock_ros.executor import SingleThreadedExecutor
 from phytrace_edge.sim.mock_ros.messages import message_type
+from phytrace_edge.sim.mock_ros.parameters import ParameterDescriptor
 from phytrace_edge.sim.mock_ros.runtime import (
     Context,
     Node,
@@ -26,6 +27,7 @@ __all__ = [
     "ClockType",
     "Context",
     "Node",
+    "ParameterDescriptor",
     "SingleThreadedExecutor",
     "SubscriptionEventCallbacks",
     "create_node",

@@ -31,6 +31,7 @@ from phytrace_edge.sim.mock_ros.clock import (
     VirtualTimeSource,
 )
 from phytrace_edge.sim.mock_ros.messages import Message, wire_copy
+from phytrace_edge.sim.mock_ros.parameters import Parameters
 from phytrace_edge.sim.mock_ros.qos import (
     QoSPolicyKind,
     QoSProfile,
@@ -231,8 +232,9 @@ class Timer:
         self.callback()
 
 
-class Node:
-    """``rclpy.node.Node`` with publishers, subscriptions, timers and the graph API."""
+class Node(Parameters):
+    """``rclpy.node.Node`` with publishers, subscriptions, timers, parameters and the
+    graph API."""
 
     def __init__(
         self,
@@ -244,6 +246,7 @@ class Node:
         self.context = context or _default_context
         if not self.context.ok():
             raise RuntimeError("rclpy.init() has not been called")
+        super().__init__()
         self._name, self._namespace = node_name, namespace
         self.timers: list[Timer] = []
         self.subscriptions: list[Subscription] = []
