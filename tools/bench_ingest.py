@@ -195,7 +195,7 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def publish_load(stop: threading.Event) -> None:
+def publish_load(stop: threading.Event, rates: dict[str, int] = RATES_HZ) -> None:
     """The realistic robot: each topic at its rate, from a thread per topic."""
     from cyclonedds.core import Policy, Qos
     from cyclonedds.domain import Domain, DomainParticipant
@@ -209,7 +209,7 @@ def publish_load(stop: threading.Event) -> None:
     participant = DomainParticipant(domain_id)
     qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
     threads = []
-    for topic, rate in RATES_HZ.items():
+    for topic, rate in rates.items():
         sample = samples()[topic]
         writer = DataWriter(
             participant, Topic(participant, dds_topic_name(topic), type(sample)), qos=qos

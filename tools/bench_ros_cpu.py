@@ -22,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench_ingest import cpu_seconds, samples  # tools/, beside this file
+from bench_ingest import cpu_seconds, publish_load  # tools/, beside this file
 
 # about 193 messages a second, as the issue measured on a delivery robot
 RATES_HZ = {
@@ -50,29 +50,7 @@ WARM_UP_S = 8.0
 
 def publish(stop: threading.Event) -> None:
     """The robot: each topic at its rate, Cyclone DDS with ROS 2's names and types."""
-    from cyclonedds.core import Policy, Qos
-    from cyclonedds.domain import DomainParticipant
-    from cyclonedds.pub import DataWriter
-    from cyclonedds.topic import Topic
-
-    from phytrace_edge.ingest.sources.dds import dds_topic_name
-
-    participant = DomainParticipant(int(os.environ["ROS_DOMAIN_ID"]))
-    qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
-    for topic, rate in RATES_HZ.items():
-        sample = samples()[topic]
-        writer = DataWriter(
-            participant, Topic(participant, dds_topic_name(topic), type(sample)), qos=qos
-        )
-
-        def loop(w=writer, s=sample, period=1.0 / rate) -> None:
-            next_at = time.monotonic()
-            while not stop.wait(max(0.0, next_at - time.monotonic())):
-                w.write(s)
-                next_at += period
-
-        threading.Thread(target=loop, daemon=True).start()
-    stop.wait()
+    publish_load(stop, RATES_HZ)
 
 
 def bare(stop: threading.Event) -> None:

@@ -16,6 +16,7 @@ from collections.abc import Mapping
 
 from phytrace_edge.config.settings import Setting, Settings, setting_infos
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.units import format_bytes
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
 if TYPE_CHECKING:
@@ -113,23 +114,31 @@ def read_config_file(path: str) -> dict[str, Any]:
         import tomllib
     else:  # pragma: no cover - exercised on 3.10 only
         import tomli as tomllib
-    try:
-        if not stat.S_ISREG(os.stat(path).st_mode):
-            raise ConfigError(f"config file {path}: not a regular file")
-        with open(path, "rb") as handle:
-            data = handle.read(CONFIG_FILE_MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise ConfigError(f"config file {path}: not found") from None
-    except OSError as exc:
-        raise ConfigError(f"config file {path}: cannot read ({exc.strerror})") from None
-    if len(data) > CONFIG_FILE_MAX_BYTES:
-        raise ConfigError(f"config file {path}: larger than 1 MiB - is it the right file?")
+    data = _read_small_file(path, "config file", CONFIG_FILE_MAX_BYTES)
     try:
         return tomllib.loads(data.decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise ConfigError(f"config file {path}: not UTF-8 text (byte {exc.start})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config file {path}: not valid TOML ({exc})") from None
+
+
+def _read_small_file(path: str, what: str, max_bytes: int) -> bytes:
+    """The bytes of a settings file (``what`` names it in errors): a regular file of at
+    most ``max_bytes``, or a one-line ``ConfigError``."""
+    try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            raise ConfigError(f"{what} {path}: not a regular file")
+        with open(path, "rb") as handle:
+            data = handle.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {path}: not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{what} {path}: cannot read ({exc.strerror})") from None
+    if len(data) > max_bytes:
+        limit = format_bytes(max_bytes)
+        raise ConfigError(f"{what} {path}: larger than {limit} - is it the right file?")
+    return data
 
 
 def default_state_dir(env: Mapping[str, str]) -> str:
@@ -155,15 +164,7 @@ def read_env_file(path: str) -> dict[str, str]:
     """A systemd ``EnvironmentFile`` (``KEY=VALUE`` lines; ``#`` and ``;`` comments;
     a value may be quoted) as a dict: the service's settings, for a command run beside
     the service (``status --env-file /etc/phytrace-edge/phytrace-edge.env``)."""
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(ENV_FILE_MAX_BYTES + 1)
-    except FileNotFoundError:
-        raise ConfigError(f"env file {path}: not found") from None
-    except OSError as exc:
-        raise ConfigError(f"env file {path}: cannot read ({exc.strerror})") from None
-    if len(data) > ENV_FILE_MAX_BYTES:
-        raise ConfigError(f"env file {path}: larger than 64 KiB - is it the right file?")
+    data = _read_small_file(path, "env file", ENV_FILE_MAX_BYTES)
     values = {}
     for number, raw in enumerate(data.decode("utf-8", "replace").splitlines(), start=1):
         line = raw.strip()

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from phytrace_edge.builder.envelope import envelope
+from phytrace_edge.ingest.convert import present
 
 EVENT_TYPE_HEALTH = "bridge.health"
 PROBLEMS_MAX = 64
@@ -60,7 +61,7 @@ def health_event(
         "problems": [p[:PROBLEM_MAX_CHARS] for p in report["problems"][:PROBLEMS_MAX]],
         "version": str(report["service"].get("version", "")),
         "uptime_s": round(max(0.0, uptime_s), 1),
-        "queue": _present(
+        "queue": present(
             depth=queue["depth"],
             bytes=queue["bytes"],
             fill=queue["fill"],
@@ -83,7 +84,7 @@ def health_event(
 
 def _topic(figures: Mapping[str, Any]) -> dict[str, Any]:
     age = figures.get("last_seen_age_s")
-    return _present(
+    return present(
         received=figures.get("received", 0),
         rate_hz=figures.get("rate_hz", 0.0),
         last_seen_age_s=None if age is None else max(0.0, age),
@@ -91,7 +92,3 @@ def _topic(figures: Mapping[str, Any]) -> dict[str, Any]:
         publishers=figures.get("publishers"),
         qos_incompatible=figures.get("qos_incompatible"),
     )
-
-
-def _present(**values: Any) -> dict[str, Any]:
-    return {key: value for key, value in values.items() if value is not None}
