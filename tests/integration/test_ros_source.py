@@ -46,16 +46,14 @@ class Graph:
         builder = UDMBuilder(wiring.builder_options(settings), clock=NodeClock(self.api))
         self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
         node = self.api.create_node("phytrace_edge")
-        # as the ros input does: state streams on a node no executor spins, taken at
-        # the tick
-        sampling = self.api.create_node("phytrace_edge_sampling")
+        # as the ros input does: state streams taken at the tick
         self.subscriber = subscribe_topics(
             self.api,
             node,
             wanted_topics(dict(options.topics), dict(options.extra_topics)),
             self.dispatcher.on_message,
             dict(options.qos_overrides),
-            sampling_node=sampling,
+            take_at_tick=True,
         )
         sampler = Sampler(
             builder,
@@ -101,13 +99,14 @@ def odom(x: float) -> m.Odometry:
 
 
 def test_a_message_published_before_the_next_graph_check_is_not_lost(graph) -> None:
-    """Every topic is subscribed from the start (best effort, volatile: it matches any
-    publisher), so a one-shot ERROR published a second after its publisher appeared,
-    before the bridge looked at the graph again, is heard (it was lost in 4 of 4 runs
-    on real rclpy when subscriptions waited for the graph)."""
+    """Every topic is subscribed from the start, so a one-shot ERROR published a second
+    after its publisher appeared, before the bridge looked at the graph again, is heard
+    (it was lost in 4 of 4 runs on real rclpy when subscriptions waited for the graph).
+    Diagnostics are listened to as their publishers offer them, reliable and volatile,
+    so the graph check finds nothing to change."""
     g = graph()
-    _, choice, _ = g.subscription("/diagnostics")
-    assert (choice.reliable, choice.transient_local) == (False, False)
+    first, choice, _ = g.subscription("/diagnostics")
+    assert (choice.reliable, choice.transient_local) == (True, False)
     g.run(0.5)
     publisher = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
     g.run(1.0)  # discovered, but the next graph check is later
@@ -117,9 +116,21 @@ def test_a_message_published_before_the_next_graph_check_is_not_lost(graph) -> N
     assert g.received("/diagnostics") == 1
     errors = [e for ev in g.events for e in ev.get("operational", {}).get("errors", [])]
     assert [(e["name"], e["level"]) for e in errors][:1] == [("motor", "error")]
-    g.run(GRAPH_CHECK_S)  # the graph check then matches the publisher: reliable now
-    _, choice, _ = g.subscription("/diagnostics")
-    assert choice.reliable
+    g.run(GRAPH_CHECK_S)
+    assert g.subscription("/diagnostics")[0] is first  # matched already: not re-created
+
+
+def test_state_streams_listen_best_effort_before_a_publisher_is_seen(graph) -> None:
+    """A sensor's driver publishes best effort: before the bridge has seen one, it
+    listens best effort, which matches any publisher."""
+    g = graph()
+    _, choice, _ = g.subscription("/scan")
+    assert (choice.reliable, choice.transient_local) == (False, False)
+    scan = g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
+    g.run(0.5)
+    scan.publish(m.LaserScan(range_min=0.1, range_max=10.0, ranges=[2.0]))
+    g.run(0.5)
+    assert g.received("/scan") == 1
 
 
 def test_a_best_effort_sensor_is_heard(graph) -> None:
@@ -288,8 +299,8 @@ def test_state_streams_are_taken_at_the_tick_not_called_back(graph) -> None:
 
 
 def test_an_incompatible_state_stream_is_counted_from_the_graph(graph) -> None:
-    """The sampling node runs no event handlers: its QoS problems are read off the
-    graph (a reliable request meets a best-effort lidar)."""
+    """No executor runs a state stream's event handlers: its QoS problems are read off
+    the graph (a reliable request meets a best-effort lidar)."""
     g = graph(TOPIC_QOS="/scan=reliable")
     g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
     g.run(GRAPH_CHECK_S + 0.1)

@@ -22,7 +22,7 @@ from phytrace_edge.sim.mock_ros.runtime import SubscriptionEventCallbacks
 @pytest.fixture
 def context() -> mock_ros.Context:
     # instant discovery: these tests are about other things (discovery has its own)
-    ctx = mock_ros.Context(virtual_time=True, discovery_latency_s=0.0)
+    ctx = mock_ros.Context(virtual_time=True, discovery_latency_s=0.0, subscription_side_lag_s=0.0)
     mock_ros.init(context=ctx)
     yield ctx
     mock_ros.shutdown(context=ctx)
@@ -119,6 +119,116 @@ def test_discovery_takes_time_and_what_is_published_before_is_lost() -> None:
         publisher.publish(m.String(data="matched"))
         _spin_until_idle(context, node, seconds=0.1)
         assert [msg.data for msg in received] == ["matched"]
+    finally:
+        mock_ros.shutdown(context=context)
+
+
+@pytest.mark.parametrize(("subscription", "heard"), [("reliable", True), ("best_effort", False)])
+def test_the_publishers_side_matches_first(subscription: str, heard: bool) -> None:
+    """A reliable publisher whose subscription count already says 1 publishes at once:
+    a reliable subscription gets it (resent once its side has matched), a best-effort
+    one drops it (measured on Fast DDS, and the mock does the same)."""
+    context = mock_ros.Context(virtual_time=True, discovery_latency_s=0.05)
+    mock_ros.init(context=context)
+    try:
+        node = mock_ros.create_node("n", context=context)
+        received: list = []
+        reliability = ReliabilityPolicy[subscription.upper()]
+        node.create_subscription(
+            m.String, "/t", received.append, QoSProfile(depth=10, reliability=reliability)
+        )
+        publisher = node.create_publisher(m.String, "/t", QoSProfile(depth=10))
+        while publisher.get_subscription_count() == 0:
+            _spin_until_idle(context, node, seconds=0.01)
+        publisher.publish(m.String(data="at once"))
+        _spin_until_idle(context, node, seconds=0.5)
+        assert [msg.data for msg in received] == (["at once"] if heard else [])
+    finally:
+        mock_ros.shutdown(context=context)
+
+
+def test_an_executor_leaves_alone_what_its_callback_group_refuses(
+    context: mock_ros.Context,
+) -> None:
+    from phytrace_edge.sim.mock_ros.callback_groups import CallbackGroup
+
+    class Never(CallbackGroup):
+        def can_execute(self, entity: object) -> bool:
+            return False
+
+    node = mock_ros.create_node("n", context=context)
+    called: list = []
+    publisher = node.create_publisher(m.String, "/t", 10)
+    taken = node.create_subscription(m.String, "/t", called.append, 1, callback_group=Never())
+    publisher.publish(m.String(data="a"))
+    publisher.publish(m.String(data="b"))
+    _spin_until_idle(context, node)
+    assert called == []
+    assert taken.handle.take_message(m.String, False)[0].data == "b"  # depth 1: the newest
+    assert taken.handle.take_message(m.String, False) is None
+
+
+def test_parameter_services_answer_only_while_an_executor_spins_the_node() -> None:
+    """A node that no executor spins offers its services and never answers them: a
+    client such as ``ros2 param list`` waits for ever (what rclpy does)."""
+    import threading
+
+    from phytrace_edge.sim.mock_ros.services import AsyncParameterClient
+
+    context = mock_ros.Context(discovery_latency_s=0.0)  # real time: two threads
+    mock_ros.init(context=context)
+    try:
+        spun = mock_ros.create_node("spun", context=context)
+        spun.declare_parameter("source_id", "amr-7")
+        mock_ros.create_node("idle", context=context)
+        client_node = mock_ros.create_node("client", context=context)
+        executor = mock_ros.SingleThreadedExecutor(context, [spun])
+        stop = threading.Event()
+
+        def spin() -> None:
+            while not stop.is_set():
+                executor.spin_once(timeout_sec=0.05)
+
+        spinner = threading.Thread(target=spin)
+        spinner.start()
+        client_executor = mock_ros.SingleThreadedExecutor(context, [client_node])
+        for name, answers in (("/spun", True), ("/idle", False)):
+            client = AsyncParameterClient(client_node, name)
+            assert client.wait_for_services(timeout_sec=1.0)  # advertised either way
+            future = client.list_parameters()
+            client_executor.spin_until_future_complete(future, timeout_sec=1.0)
+            assert future.done() is answers
+        stop.set()
+        spinner.join()
+        assert "source_id" in future_names(client_node, "/spun", executor)
+    finally:
+        mock_ros.shutdown(context=context)
+
+
+def future_names(client_node: mock_ros.Node, node: str, executor: object) -> list[str]:
+    from phytrace_edge.sim.mock_ros.services import AsyncParameterClient
+
+    future = AsyncParameterClient(client_node, node).list_parameters()
+    executor.spin_until_future_complete(future, timeout_sec=1.0)  # type: ignore[attr-defined]
+    return list(future.result().result.names)
+
+
+def test_command_line_parameters_override_declared_values(tmp_path) -> None:
+    params = tmp_path / "p.yaml"
+    params.write_text("/n:\n  ros__parameters:\n    a: from-file\n    b: 2.0\n")
+    context = mock_ros.Context(virtual_time=True)
+    mock_ros.init(
+        ["x", "--ros-args", "--params-file", str(params), "-p", "b:=3.5"], context=context
+    )
+    try:
+        node = mock_ros.create_node("n", context=context)
+        assert node.declare_parameter("a", "declared").value == "from-file"
+        assert node.declare_parameter("b", 1.0).value == 3.5  # the later -p wins
+        assert node.declare_parameter("c", "mine", ignore_override=True).value == "mine"
+        kept = node.declare_parameter("d", "declared")
+        assert kept.value == "declared"
+        other = mock_ros.create_node("other", context=context)
+        assert other.declare_parameter("a", "declared").value == "declared"  # not its section
     finally:
         mock_ros.shutdown(context=context)
 
@@ -225,7 +335,7 @@ def test_the_sim_input_declares_the_settings_read_only_without_the_key() -> None
         (node,) = [n for n in source._context.nodes if n.get_name() == "phytrace_edge"]
         assert node.get_parameter("source_id").value == "amr-7"
         assert node.get_parameter("sample_rate_hz").value == 2.0
-        assert node.get_parameter("source_id").descriptor.read_only
+        assert node.describe_parameter("source_id").read_only
         assert not node.has_parameter("phycloud_api_key")
     finally:
         source.stop()

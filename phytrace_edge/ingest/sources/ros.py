@@ -1,11 +1,17 @@
 """``BRIDGE_INPUT=ros``: the robot's ROS 2 graph through rclpy, the one module that
-imports it (lazily: rclpy comes with ROS 2, not from PyPI, and the core runs without)."""
+imports it (lazily: rclpy comes with ROS 2 or its wheels, and the core runs without).
+
+One node, ``phytrace_edge``: its executor runs the callbacks of the topics where every
+message counts, the graph checks and the parameter services; the state streams are
+taken at the sample tick (``ros_graph.taken_at_the_tick``).
+"""
 
 from __future__ import annotations
 
 import importlib
 import threading
 from collections.abc import Callable, Mapping
+from types import ModuleType
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
@@ -22,15 +28,17 @@ from phytrace_edge.ingest.sources.ros_graph import (
 SPIN_TIMEOUT_S = 0.1
 
 
-def load_rclpy() -> RosApi:
-    """The real rclpy as a ``RosApi``; raises ImportError when ROS 2 is not sourced."""
-    rclpy = importlib.import_module("rclpy")
-    qos = importlib.import_module("rclpy.qos")
-    clock = importlib.import_module("rclpy.clock")
+def load_rclpy(import_module: Callable[[str], ModuleType] = importlib.import_module) -> RosApi:
+    """rclpy as a ``RosApi``; raises ImportError when ROS 2 is not sourced.
+    ``import_module`` finds its modules: the real ones, or the mock's
+    (``sim.mock_ros.as_rclpy``), so both go through this same code."""
+    rclpy = import_module("rclpy")
+    qos = import_module("rclpy.qos")
+    clock = import_module("rclpy.clock")
 
     def message_type(type_name: str) -> type:
         package, _, name = type_name.split("/")
-        return getattr(importlib.import_module(f"{package}.msg"), name)
+        return getattr(import_module(f"{package}.msg"), name)
 
     def make_clock(kind: str) -> Any:
         clock_type = (
@@ -39,22 +47,22 @@ def load_rclpy() -> RosApi:
         return clock.Clock(clock_type=clock_type)
 
     try:  # Iron and later
-        events = importlib.import_module("rclpy.event_handler")
+        events = import_module("rclpy.event_handler")
     except ImportError:  # Humble
-        events = importlib.import_module("rclpy.qos_event")
+        events = import_module("rclpy.qos_event")
 
     def subscription_events(on_incompatible: Callable[[Any], None]) -> Any:
         return events.SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
 
     def take(subscription: Any) -> Any:
-        """The newest message waiting on a subscription no executor spins (what the
+        """The newest message waiting on a subscription no executor runs (what the
         executor itself does before it calls a callback), or None."""
         with subscription.handle:
             taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
         return None if taken is None else taken[0]
 
     def parameter_descriptor(description: str) -> Any:
-        descriptor = importlib.import_module("rcl_interfaces.msg").ParameterDescriptor
+        descriptor = import_module("rcl_interfaces.msg").ParameterDescriptor
         return descriptor(description=description, read_only=True, dynamic_typing=True)
 
     return RosApi(
@@ -65,6 +73,7 @@ def load_rclpy() -> RosApi:
         subscription_events,
         take,
         parameter_descriptor,
+        import_module("rclpy.callback_groups").CallbackGroup,
     )
 
 
@@ -99,7 +108,6 @@ class RosSource:
         except ImportError as exc:
             raise ConfigError(import_error_message(exc)) from None
         self._node: Any = None
-        self._sampling_node: Any = None
         self._executor: Any = None
         self._subscriber: TopicSubscriber | None = None
 
@@ -115,16 +123,15 @@ class RosSource:
         )
         self._node = self._api.create_node(NODE_NAME)
         declare_settings(self._api, self._node, dict(self._options.parameters))
-        # state streams (odometry, IMU, scan, ...) are taken at the sample tick from a
-        # node no executor spins: no Python callback for each of their messages
-        self._sampling_node = self._api.create_node(f"{NODE_NAME}_sampling")
+        # state streams (odometry, IMU, scan, ...) are taken at the sample tick: no
+        # Python callback for each of their messages
         self._subscriber = subscribe_topics(
             self._api,
             self._node,
             wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
             feed.on_message,
             dict(self._options.qos_overrides),
-            sampling_node=self._sampling_node,
+            take_at_tick=True,
         )
         self._executor = self._executors.SingleThreadedExecutor()
         self._executor.add_node(self._node)
@@ -142,9 +149,8 @@ class RosSource:
             self._subscriber.take_latest()
 
     def stop(self) -> None:
-        for node in (self._node, self._sampling_node):
-            if node is not None:
-                node.destroy_node()
+        if self._node is not None:
+            self._node.destroy_node()
         self._rclpy.try_shutdown()
 
     def finished(self) -> Finished | None:

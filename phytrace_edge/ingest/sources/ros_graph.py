@@ -22,7 +22,15 @@ log = logging.getLogger(__name__)
 SAMPLED_QUEUE_DEPTH = 5
 EVERY_MESSAGE_QUEUE_DEPTH = 100
 GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
+# Before a topic's publisher is seen, the bridge listens anyway, so that nothing
+# published before the next look at the graph is lost. State streams: best effort,
+# which matches every publisher (their next message comes soon anyway). Topics where
+# every message counts (diagnostics, goals, a task's state, /rosout): reliable, as their
+# publishers are, because only a reliable pair recovers a message published the moment
+# the publisher matched, before the bridge's side had matched it (measured on Fast DDS:
+# 2 of 12 such one-shot ERRORs lost to a best-effort subscription).
 ANY_PUBLISHER = QosChoice(reliable=False, transient_local=False)
+RELIABLE_PUBLISHER = QosChoice(reliable=True, transient_local=False)
 OnMessage = Callable[[str, Any], None]
 
 
@@ -35,18 +43,39 @@ class RosApi:
     qos: Any  # the rclpy.qos module: QoSProfile and the policy enums
     clock: Callable[[str], Any]  # "steady" or "system" -> an rclpy Clock
     subscription_events: Callable[[Callable[[Any], None]], Any]  # incompatible-QoS callback
-    take: Callable[[Any], Any] = lambda subscription: None  # its newest message, or None
+    take: Callable[[Any], Any]  # a subscription's newest message, or None
     # a read-only ParameterDescriptor with this description
-    parameter_descriptor: Callable[[str], Any] = lambda description: None
+    parameter_descriptor: Callable[[str], Any]
+    callback_group_base: type  # rclpy.callback_groups.CallbackGroup
+
+
+def taken_at_the_tick(api: RosApi) -> Any:
+    """A callback group no executor runs: a subscription in it is never waited on and
+    has no callback; the sampler takes its newest message at the tick. The node stays
+    one node, spun for its timers and its parameter services (a second node that
+    nobody spins would leave ``ros2 param list`` waiting forever)."""
+
+    class TakenAtTheTick(api.callback_group_base):  # type: ignore[name-defined]
+        def can_execute(self, entity: Any) -> bool:
+            return False
+
+        def beginning_execution(self, entity: Any) -> bool:
+            return False
+
+        def ending_execution(self, entity: Any) -> None:
+            return None
+
+    return TakenAtTheTick()
 
 
 def declare_settings(api: RosApi, node: Any, parameters: dict[str, tuple[Any, str]]) -> None:
     """The bridge's effective settings as read-only parameters of its node, so
     ``ros2 param list/get /phytrace_edge`` shows what it runs with (a change needs a
-    restart: settings are read once, at start)."""
+    restart: settings are read once, at start). The effective value, not rcl's
+    override: an environment variable outranks ``-p``, and the parameter says so."""
     for name, (value, doc) in parameters.items():
         if not node.has_parameter(name):  # use_sim_time: the node declares it itself
-            node.declare_parameter(name, value, api.parameter_descriptor(doc))
+            node.declare_parameter(name, value, api.parameter_descriptor(doc), ignore_override=True)
 
 
 class NodeClock:
@@ -99,6 +128,10 @@ def wanted_topics(
 class TopicSubscriber:
     """One subscription per enabled topic, matched to what its publishers offer.
 
+    State streams are taken at the sample tick when ``take_at_tick`` is set: their
+    subscriptions sit in a callback group no executor runs (``taken_at_the_tick``), so
+    no Python runs for each of their messages.
+
     ``refresh`` (at start and then periodically) subscribes every topic at once (best
     effort and volatile while no publisher is known: that matches any), and re-creates
     a subscription when its publishers need another QoS (reliable, transient local: a
@@ -115,10 +148,10 @@ class TopicSubscriber:
         topics: dict[str, Wanted],
         on_message: OnMessage,
         overrides: dict[str, QosChoice] | None = None,
-        sampling_node: Any = None,
+        take_at_tick: bool = False,
     ) -> None:
         self._api, self._node, self._topics = api, node, topics
-        self._sampling_node = sampling_node
+        self._taken_at_tick = taken_at_the_tick(api) if take_at_tick else None
         self._lock = threading.Lock()
         self._on_message = on_message
         self._overrides = overrides or {}
@@ -152,13 +185,15 @@ class TopicSubscriber:
             if publishers:
                 choice = self._overrides.get(canonical) or matching_qos(offered)
                 type_name = publishers[0].topic_type
-                if self._node_of(wanted) is not self._node:  # no executor runs its events
+                if self._is_taken(wanted):  # no executor runs its events
                     self._count_incompatible(canonical, choice, offered)
             elif current is None and wanted.types:
                 # nobody seen yet: listen from now on anyway, best effort and volatile,
                 # which matches every publisher, so nothing published before the next
                 # look at the graph is lost (a one-shot diagnostics ERROR)
-                choice = self._overrides.get(canonical) or ANY_PUBLISHER
+                choice = self._overrides.get(canonical) or (
+                    ANY_PUBLISHER if wanted.sampled else RELIABLE_PUBLISHER
+                )
                 type_name = wanted.types[0]
             else:
                 continue
@@ -173,7 +208,7 @@ class TopicSubscriber:
                 )
                 continue
             if current is not None:
-                self._node_of(wanted).destroy_subscription(current[0])
+                self._node.destroy_subscription(current[0])
             self.subscribed[canonical] = (
                 self._subscribe(canonical, wanted, message_class, choice),
                 choice,
@@ -226,29 +261,26 @@ class TopicSubscriber:
 
     def take_latest(self) -> None:
         """Hand over the newest message of each sampled topic, if one came since the
-        last tick (they sit on the sampling node, which no executor spins)."""
+        last tick (no executor runs their subscriptions)."""
         taken = []
         with self._lock:
             for canonical, wanted in self._topics.items():
                 current = self.subscribed.get(canonical)
-                if current is not None and self._node_of(wanted) is not self._node:
+                if current is not None and self._is_taken(wanted):
                     taken.append((canonical, self._api.take(current[0])))
         for canonical, msg in taken:
             if msg is not None:
                 self._on_message(canonical, msg)
 
-    def _node_of(self, wanted: Wanted) -> Any:
-        """State streams go to the sampling node when there is one: no callback (and no
-        Python) per message, only a take at the tick."""
-        if wanted.sampled and self._sampling_node is not None:
-            return self._sampling_node
-        return self._node
+    def _is_taken(self, wanted: Wanted) -> bool:
+        """Whether this topic is taken at the tick rather than called back."""
+        return wanted.sampled and self._taken_at_tick is not None
 
     def _subscribe(
         self, canonical: str, wanted: Wanted, message_class: type, choice: QosChoice
     ) -> Any:
         qos = self._api.qos
-        sampled = self._node_of(wanted) is not self._node
+        sampled = self._is_taken(wanted)
         profile = qos.QoSProfile(
             depth=1 if sampled else wanted.depth,
             reliability=qos.ReliabilityPolicy.RELIABLE
@@ -270,11 +302,12 @@ class TopicSubscriber:
                 choice.describe(),
             )
 
-        return self._node_of(wanted).create_subscription(
+        return self._node.create_subscription(
             message_class,
             wanted.actual,
             (lambda msg: None) if sampled else on_message,  # taken at the tick instead
             profile,
+            callback_group=self._taken_at_tick if sampled else None,
             event_callbacks=self._api.subscription_events(on_incompatible),
         )
 
@@ -285,11 +318,11 @@ def subscribe_topics(
     topics: dict[str, Wanted],
     on_message: OnMessage,
     overrides: dict[str, QosChoice] | None = None,
-    sampling_node: Any = None,
+    take_at_tick: bool = False,
 ) -> TopicSubscriber:
-    """Subscribe ``node`` (state streams: ``sampling_node``, if given) to the topics,
+    """Subscribe ``node`` to the topics (state streams taken at the tick, if asked),
     and look again every GRAPH_CHECK_S for publishers that need another QoS."""
-    subscriber = TopicSubscriber(api, node, topics, on_message, overrides, sampling_node)
+    subscriber = TopicSubscriber(api, node, topics, on_message, overrides, take_at_tick)
     subscriber.refresh()
     node.create_timer(GRAPH_CHECK_S, subscriber.refresh, clock=api.clock("steady"))
     return subscriber

@@ -14,6 +14,7 @@ from typing import Any
 
 from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
+from phytrace_edge.ingest.sources.ros import load_rclpy
 from phytrace_edge.ingest.sources.ros_graph import (
     NodeClock,
     RosApi,
@@ -23,6 +24,7 @@ from phytrace_edge.ingest.sources.ros_graph import (
     wanted_topics,
 )
 from phytrace_edge.sim import mock_ros
+from phytrace_edge.sim.mock_ros import as_rclpy
 from phytrace_edge.sim.robot import DeliveryRobot
 from phytrace_edge.sim.world import World
 
@@ -30,30 +32,9 @@ SPIN_TIMEOUT_S = 0.1
 
 
 def mock_api(context: mock_ros.Context) -> RosApi:
-    """The mock rclpy as a ``RosApi`` whose nodes and clocks live in ``context``."""
-
-    def make_node(name: str, **kwargs: object) -> mock_ros.Node:
-        return mock_ros.create_node(name, context=context, **kwargs)
-
-    def make_clock(kind: str) -> mock_ros.Clock:
-        kind_type = (
-            mock_ros.ClockType.STEADY_TIME if kind == "steady" else mock_ros.ClockType.SYSTEM_TIME
-        )
-        return mock_ros.Clock(clock_type=kind_type, source=context.time_source)
-
-    return RosApi(
-        make_node,
-        mock_ros.message_type,
-        mock_ros.qos,
-        make_clock,
-        lambda on_incompatible: mock_ros.SubscriptionEventCallbacks(
-            incompatible_qos=on_incompatible
-        ),
-        lambda subscription: subscription.take(),
-        lambda description: mock_ros.ParameterDescriptor(
-            description=description, read_only=True, dynamic_typing=True
-        ),
-    )
+    """The mock rclpy as a ``RosApi`` whose nodes and clocks live in ``context``: the
+    same ``load_rclpy`` as the ``ros`` input, over the mock's modules."""
+    return load_rclpy(as_rclpy.modules(context).__getitem__)
 
 
 class SimSource:

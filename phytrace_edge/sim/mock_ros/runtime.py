@@ -1,4 +1,5 @@
-"""Nodes, publishers, subscriptions, timers and the executor of the mock rclpy.
+"""Contexts, nodes and timers of the mock rclpy (publishers and subscriptions are in
+``endpoints.py``, the executor in ``executor.py``).
 
 Semantics kept from ROS 2 on DDS, because the bridge's behaviour depends on them:
 
@@ -12,17 +13,19 @@ Semantics kept from ROS 2 on DDS, because the bridge's behaviour depends on them
   TRANSIENT_LOCAL subscription.
 - The graph API (topic names and types, publisher endpoint info with QoS) reflects
   the current publishers, so code that discovers topics and matches QoS can be tested.
+- An executor runs only what a node's callback groups allow (``callback_groups.py``),
+  and every node offers the parameter services, answered only while an executor spins
+  it (``services.py``); node loggers publish to ``/rosout``, as rcl does.
 """
 
 from __future__ import annotations
 
 import copy
 import threading
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
+from phytrace_edge.sim.mock_ros.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from phytrace_edge.sim.mock_ros.clock import (
     Clock,
     ClockType,
@@ -30,27 +33,40 @@ from phytrace_edge.sim.mock_ros.clock import (
     TimeSource,
     VirtualTimeSource,
 )
-from phytrace_edge.sim.mock_ros.messages import Message, wire_copy
-from phytrace_edge.sim.mock_ros.parameters import Parameters
+from phytrace_edge.sim.mock_ros.endpoints import (
+    Publisher,
+    Subscription,
+    SubscriptionEventCallbacks,
+    TopicEndpointInfo,
+    type_name_of,
+)
+from phytrace_edge.sim.mock_ros.messages import Message
+from phytrace_edge.sim.mock_ros.parameters import Parameters, overrides_from_arguments
 from phytrace_edge.sim.mock_ros.qos import (
-    QoSPolicyKind,
     QoSProfile,
     as_profile,
-    incompatible_policy,
 )
+from phytrace_edge.sim.mock_ros.rosout import NodeLogger
+from phytrace_edge.sim.mock_ros.services import Service, parameter_services
 
 # Discovery is not instant in DDS: a new publisher shows in the graph, and its
 # messages reach a subscription, only once the two have found each other; what it
-# publishes before is lost to that subscription (a volatile one).
+# publishes before is lost to that subscription (a volatile one). Nor is it symmetric:
+# the publisher's side may match first (its subscription count says 1) while the
+# subscription's side does not know the publisher yet. A best-effort subscription
+# drops what arrives then; a reliable pair recovers it once both sides have matched.
 DISCOVERY_LATENCY_S = 0.05
+SUBSCRIPTION_SIDE_LAG_S = 0.1
 
 
 class Context:
     """One ROS domain: its graph, its time source and the condition executors wait on."""
 
-    def discovered(self, *created_ns: int) -> bool:
-        """Whether endpoints created at ``created_ns`` have found each other by now."""
-        return self.time_source.steady_ns() >= max(created_ns) + self.discovery_latency_ns
+    def discovered(self, *created_ns: int, lag_ns: int = 0) -> bool:
+        """Whether endpoints created at ``created_ns`` have found each other by now
+        (``lag_ns`` later: the subscription's side, see SUBSCRIPTION_SIDE_LAG_S)."""
+        now = self.time_source.steady_ns()
+        return now >= max(created_ns) + self.discovery_latency_ns + lag_ns
 
     def __init__(
         self,
@@ -58,18 +74,23 @@ class Context:
         virtual_time: bool = False,
         start_system_ns: int | None = None,
         discovery_latency_s: float = DISCOVERY_LATENCY_S,
+        subscription_side_lag_s: float = SUBSCRIPTION_SIDE_LAG_S,
     ) -> None:
         self.time_source: TimeSource = (
             VirtualTimeSource(start_system_ns) if virtual_time else RealTimeSource()
         )
         self.discovery_latency_ns = int(discovery_latency_s * 1e9)
+        self.subscription_side_lag_ns = int(subscription_side_lag_s * 1e9)
         self.condition = threading.Condition()
         self.publishers: list[Publisher] = []
         self.subscriptions: list[Subscription] = []
         self.nodes: list[Node] = []
+        self.arguments: list[str] = []  # the process's, for --ros-args parameter overrides
         self._ok = False
 
-    def init(self) -> None:
+    def init(self, args: list[str] | None = None) -> None:
+        if args is not None:
+            self.arguments = list(args)
         self._ok = True
 
     def ok(self) -> bool:
@@ -90,130 +111,41 @@ def default_context() -> Context:
     return _default_context
 
 
-def init(args: Any = None, *, context: Context | None = None) -> None:
-    """``rclpy.init``; pass ``Context(virtual_time=True)`` to simulate time."""
+def init(
+    args: list[str] | None = None,
+    *,
+    context: Context | None = None,
+    signal_handler_options: Any = None,
+) -> None:
+    """``rclpy.init``; pass ``Context(virtual_time=True)`` to simulate time. The mock
+    installs no signal handlers, whatever ``signal_handler_options`` says."""
     global _default_context
     if context is not None:
         _default_context = context
-    _default_context.init()
+    _default_context.init(args)
 
 
 def shutdown(*, context: Context | None = None) -> None:
     (context or _default_context).shutdown()
 
 
-@dataclass
-class QoSRequestedIncompatibleQoSInfo:
-    total_count: int = 0
-    total_count_change: int = 0
-    last_policy_kind: QoSPolicyKind = QoSPolicyKind.INVALID
-
-
-@dataclass
-class SubscriptionEventCallbacks:
-    incompatible_qos: Callable[[QoSRequestedIncompatibleQoSInfo], None] | None = None
-
-
-@dataclass
-class TopicEndpointInfo:
-    node_name: str
-    node_namespace: str
-    topic_type: str
-    qos_profile: QoSProfile
-
-
-def _type_name(msg_type: type[Message]) -> str:
-    return msg_type._type
-
-
-class Publisher:
-    def __init__(self, node: Node, msg_type: type[Message], topic: str, qos: QoSProfile) -> None:
-        self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
-        self._history: deque[Any] = deque(maxlen=qos.depth)
-        self.created_ns = node.context.time_source.steady_ns()
-
-    def publish(self, msg: Any) -> None:
-        if not isinstance(msg, self.msg_type):
-            raise TypeError(f"Expected {self.msg_type.__name__}, got {type(msg).__name__}")
-        context = self.node.context
-        with context.condition:
-            if self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self._history.append(wire_copy(msg))
-            for subscription in context.subscriptions:
-                if subscription.matches_topic(self) and context.discovered(
-                    self.created_ns, subscription.created_ns
-                ):
-                    subscription.offer(self, msg)
-            context.condition.notify_all()
-
-
-class Subscription:
-    def __init__(
-        self,
-        node: Node,
-        msg_type: type[Message],
-        topic: str,
-        callback: Callable[[Any], None],
-        qos: QoSProfile,
-        event_callbacks: SubscriptionEventCallbacks | None,
-    ) -> None:
-        self.node, self.msg_type, self.topic_name = node, msg_type, topic
-        self.callback, self.qos_profile = callback, qos
-        self.event_callbacks = event_callbacks or SubscriptionEventCallbacks()
-        self.pending: deque[Any] = deque(
-            maxlen=qos.depth if qos.history.name == "KEEP_LAST" else None
-        )
-        self.incompatible = QoSRequestedIncompatibleQoSInfo()
-        self.pending_events: list[QoSRequestedIncompatibleQoSInfo] = []
-        self._incompatible_with: set[int] = set()
-        self.created_ns = node.context.time_source.steady_ns()
-
-    def take(self) -> Any:
-        """The oldest message waiting, or None (what rclpy's take_message gives a
-        subscription no executor spins)."""
-        with self.node.context.condition:
-            return self.pending.popleft() if self.pending else None
-
-    def matches_topic(self, publisher: Publisher) -> bool:
-        return publisher.topic_name == self.topic_name and _type_name(
-            publisher.msg_type
-        ) == _type_name(self.msg_type)
-
-    def offer(self, publisher: Publisher, msg: Any) -> None:
-        """Deliver ``msg`` if QoS allows (caller holds the context condition)."""
-        policy = incompatible_policy(publisher.qos_profile, self.qos_profile)
-        if policy is not None:
-            self._note_incompatible(publisher, policy)
-            return
-        self.pending.append(wire_copy(msg))
-
-    def _note_incompatible(self, publisher: Publisher, policy: QoSPolicyKind) -> None:
-        if id(publisher) in self._incompatible_with:
-            return
-        self._incompatible_with.add(id(publisher))
-        self.incompatible.total_count += 1
-        self.incompatible.last_policy_kind = policy
-        self.pending_events.append(
-            QoSRequestedIncompatibleQoSInfo(self.incompatible.total_count, 1, policy)
-        )
-
-    def match_existing(self, publishers: list[Publisher]) -> None:
-        """On creation: note incompatible publishers and take transient-local history."""
-        for publisher in publishers:
-            if not self.matches_topic(publisher):
-                continue
-            policy = incompatible_policy(publisher.qos_profile, self.qos_profile)
-            if policy is not None:
-                self._note_incompatible(publisher, policy)
-            elif self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self.pending.extend(wire_copy(m) for m in publisher._history)
+def try_shutdown(*, context: Context | None = None) -> None:
+    """``rclpy.try_shutdown``: shut down unless already shut down."""
+    if (context or _default_context).ok():
+        shutdown(context=context)
 
 
 class Timer:
     def __init__(
-        self, period_ns: int, callback: Callable[[], None], clock: Clock, source: TimeSource
+        self,
+        period_ns: int,
+        callback: Callable[[], None],
+        clock: Clock,
+        source: TimeSource,
+        callback_group: CallbackGroup,
     ):
         self.period_ns, self.callback, self.clock = period_ns, callback, clock
+        self.callback_group = callback_group
         self._source = source
         self.next_call_ns = source.steady_ns() + period_ns
         self.cancelled = False
@@ -233,8 +165,8 @@ class Timer:
 
 
 class Node(Parameters):
-    """``rclpy.node.Node`` with publishers, subscriptions, timers, parameters and the
-    graph API."""
+    """``rclpy.node.Node`` with publishers, subscriptions, timers, parameters (and their
+    services), a logger and the graph API."""
 
     def __init__(
         self,
@@ -246,19 +178,35 @@ class Node(Parameters):
         self.context = context or _default_context
         if not self.context.ok():
             raise RuntimeError("rclpy.init() has not been called")
-        super().__init__()
         self._name, self._namespace = node_name, namespace
+        super().__init__(
+            overrides_from_arguments(self.context.arguments, self.get_fully_qualified_name())
+        )
+        self.default_callback_group = MutuallyExclusiveCallbackGroup()
         self.timers: list[Timer] = []
         self.subscriptions: list[Subscription] = []
         self.publishers: list[Publisher] = []
+        self.services: list[Service] = parameter_services(self, self.default_callback_group)
+        self._logger = NodeLogger(self)
         with self.context.condition:
             self.context.nodes.append(self)
+            self.context.condition.notify_all()  # clients wait for services to appear
 
     def get_name(self) -> str:
         return self._name
 
     def get_namespace(self) -> str:
         return self._namespace
+
+    def get_fully_qualified_name(self) -> str:
+        return f"{self._namespace.rstrip('/')}/{self._name}"
+
+    def get_logger(self) -> NodeLogger:
+        return self._logger
+
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        with self.context.condition:
+            return [(n.get_name(), n.get_namespace()) for n in self.context.nodes]
 
     def get_clock(self) -> Clock:
         return Clock(clock_type=ClockType.ROS_TIME, source=self.context.time_source)
@@ -282,10 +230,17 @@ class Node(Parameters):
         callback: Callable[[Any], None],
         qos_profile: QoSProfile | int,
         *,
+        callback_group: CallbackGroup | None = None,
         event_callbacks: SubscriptionEventCallbacks | None = None,
     ) -> Subscription:
         subscription = Subscription(
-            self, msg_type, topic, callback, as_profile(qos_profile), event_callbacks
+            self,
+            msg_type,
+            topic,
+            callback,
+            as_profile(qos_profile),
+            event_callbacks,
+            callback_group or self.default_callback_group,
         )
         with self.context.condition:
             subscription.match_existing(self.context.publishers)
@@ -294,13 +249,18 @@ class Node(Parameters):
         return subscription
 
     def create_timer(
-        self, timer_period_sec: float, callback: Callable[[], None], clock: Clock | None = None
+        self,
+        timer_period_sec: float,
+        callback: Callable[[], None],
+        callback_group: CallbackGroup | None = None,
+        clock: Clock | None = None,
     ) -> Timer:
         timer = Timer(
             int(timer_period_sec * 1e9),
             callback,
             clock or self.get_clock(),
             self.context.time_source,
+            callback_group or self.default_callback_group,
         )
         self.timers.append(timer)
         return timer
@@ -330,6 +290,7 @@ class Node(Parameters):
             self.destroy_publisher(publisher)
         for timer in self.timers:
             timer.cancel()
+        self.services.clear()
         with self.context.condition:
             if self in self.context.nodes:
                 self.context.nodes.remove(self)
@@ -340,7 +301,7 @@ class Node(Parameters):
                 TopicEndpointInfo(
                     p.node.get_name(),
                     p.node.get_namespace(),
-                    _type_name(p.msg_type),
+                    type_name_of(p.msg_type),
                     copy.copy(p.qos_profile),
                 )
                 for p in self.context.publishers
