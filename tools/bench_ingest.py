@@ -202,10 +202,10 @@ def publish_load(stop: threading.Event, rates: dict[str, int] = RATES_HZ) -> Non
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
+    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
 
     domain_id, localhost = domain_settings(os.environ)
-    _domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
+    _domain = Domain(domain_id, domain_config(localhost_only=True)) if localhost else None
     participant = DomainParticipant(domain_id)
     qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
     threads = []
@@ -234,10 +234,10 @@ def bare_reader(stop: threading.Event) -> None:
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
+    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
 
     domain_id, localhost = domain_settings(os.environ)
-    _domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
+    _domain = Domain(domain_id, domain_config(localhost_only=True)) if localhost else None
     participant = DomainParticipant(domain_id)
     qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(100))
     readers = [

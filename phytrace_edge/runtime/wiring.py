@@ -92,6 +92,7 @@ def source_options(
         parameters=ros_parameter_values(s) if kind in ("ros", "sim") else {},
         dds_domain_id=domain_id,
         dds_localhost_only=localhost_only,
+        dds_cyclonedds_uri=env.get("CYCLONEDDS_URI", "") if kind == "dds" else "",
         **simulator,
     )
 

@@ -8,12 +8,12 @@ log record on /rosout.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 import threading
+import typing
+from typing import Any
 
-import orjson
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
@@ -21,7 +21,8 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from phytrace_edge.ingest.sources import dds_types as t
-from phytrace_edge.ingest.sources.dds import LOCALHOST_CONFIG, dds_topic_name, domain_settings
+from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
+from tests.ros.known import KNOWN
 
 BEST_EFFORT = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))
 RELIABLE = Qos(
@@ -29,103 +30,29 @@ RELIABLE = Qos(
 )
 
 
-def header(frame: str) -> t.Header_:
-    return t.Header_(stamp=t.Time_(sec=1_763_000_000, nanosec=500_000_000), frame_id=frame)
+QOS = {"best_effort": BEST_EFFORT, "reliable": RELIABLE, "latched": RELIABLE}
 
 
-def yaw(deg: float) -> t.Quaternion_:
-    half = math.radians(deg) / 2
-    return t.Quaternion_(z=math.sin(half), w=math.cos(half))
+def idl_sample(cls: type, fields: dict[str, Any]) -> Any:
+    """An IDL sample of ``cls`` from ``tests.ros.known``'s plain data."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    values: dict[str, Any] = {}
+    for name, value in fields.items():
+        if isinstance(value, dict):
+            values[name] = idl_sample(hints[name], value)
+        elif isinstance(value, list) and value and isinstance(value[0], dict):
+            element = typing.get_args(hints[name])[1].subtype
+            values[name] = [idl_sample(element, item) for item in value]
+        else:
+            values[name] = value
+    return cls(**values)
 
 
 def samples() -> dict[str, tuple[object, Qos]]:
-    odom = t.Odometry_(header=header("odom"), child_frame_id="base_link")
-    odom.pose.pose = t.Pose_(position=t.Point_(x=12.34, y=5.67), orientation=yaw(45.2))
-    odom.twist.twist = t.Twist_(linear=t.Vector3_(x=0.85), angular=t.Vector3_(z=math.radians(2.1)))
-    delivery = {
-        "order_id": "order-8821",
-        "package_id": "pkg-5501",
-        "state": "in_transit",
-        "destination": "dock-B3",
-        "robot_state": "autonomous",
-    }
+    """The ten topics' known messages, in the dds input's own IDL types."""
     return {
-        "/odom": (odom, BEST_EFFORT),
-        "/battery_state": (
-            t.BatteryState_(
-                header=header("battery"),
-                voltage=24.1,
-                current=-2.3,
-                percentage=0.825,
-                temperature=28.4,
-                charge=math.nan,
-                power_supply_status=2,
-                present=True,
-                cell_voltage=[4.0, 4.1],
-            ),
-            RELIABLE,
-        ),
-        "/scan": (
-            t.LaserScan_(
-                header=header("front_lidar"),
-                angle_min=-math.pi / 2,
-                angle_max=math.pi / 2,
-                angle_increment=math.pi / 4,
-                range_min=0.12,
-                range_max=12.0,
-                ranges=[0.05, math.nan, math.inf, 2.0, 0.5],
-            ),
-            BEST_EFFORT,
-        ),
-        "/imu/data": (
-            t.Imu_(
-                header=header("imu"),
-                orientation=yaw(30.0),
-                angular_velocity=t.Vector3_(z=math.radians(2.1)),
-                linear_acceleration=t.Vector3_(z=9.81),
-            ),
-            BEST_EFFORT,
-        ),
-        "/cmd_vel": (t.Twist_(linear=t.Vector3_(x=1.0), angular=t.Vector3_(z=-0.5)), RELIABLE),
-        "/gps/fix": (
-            t.NavSatFix_(
-                header=header("gps"),
-                status=t.NavSatStatus_(status=0),
-                latitude=41.8781,
-                longitude=-87.6298,
-                altitude=182.5,
-            ),
-            BEST_EFFORT,
-        ),
-        "/diagnostics": (
-            t.DiagnosticArray_(
-                header=header(""),
-                status=[
-                    t.DiagnosticStatus_(
-                        level=2, name="motor", message="overcurrent", hardware_id="mc"
-                    ),
-                    t.DiagnosticStatus_(level=0, name="lidar", message="ok", hardware_id="l1"),
-                ],
-            ),
-            RELIABLE,
-        ),
-        "/goal_pose": (
-            t.PoseStamped_(
-                header=header("map"),
-                pose=t.Pose_(position=t.Point_(x=45.0, y=22.0), orientation=yaw(90.0)),
-            ),
-            RELIABLE,
-        ),
-        "/joint_states": (
-            t.JointState_(
-                header=header("base"),
-                name=["left_wheel", "right_wheel"],
-                position=[3.14, 3.15],
-                velocity=[2.5, 2.5],
-            ),
-            BEST_EFFORT,
-        ),
-        "/delivery/status": (t.String_(data=orjson.dumps(delivery).decode()), RELIABLE),
+        topic: (idl_sample(t.DDS_TYPES[type_name], fields), QOS[qos])
+        for topic, (type_name, qos, fields) in KNOWN.items()
     }
 
 
@@ -157,7 +84,7 @@ EXTRA = {t: t for t in ("/motor/temperature", "/tf", "/cells", "/camera")}
 
 def main() -> None:
     domain_id, localhost = domain_settings(os.environ)
-    domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost else None
+    domain = Domain(domain_id, domain_config(localhost_only=True)) if localhost else None
     participant = DomainParticipant(domain_id)
     writers = []
     for topic_name, (sample, qos) in (samples() | extra_samples()).items():

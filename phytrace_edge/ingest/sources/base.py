@@ -35,6 +35,7 @@ class SourceOptions:
     parameters: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
     dds_domain_id: int = 0
     dds_localhost_only: bool = False
+    dds_cyclonedds_uri: str = ""  # the user's Cyclone configuration, kept by the dds input
     seed: int = 0  # of the simulated world
     virtual_time: bool = False  # the simulator only: run as fast as possible
     max_ticks: int | None = None  # the simulator only: stop after this many robot cycles

@@ -5,9 +5,11 @@ It reads ROS 2's own environment so it lands on the same DDS domain as the robot
 ``ROS_DOMAIN_ID`` picks the domain, and ``ROS_LOCALHOST_ONLY=1`` or
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` confine it to loopback, as rmw_cyclonedds
 does (a participant with Cyclone's defaults would see nothing of a localhost-only
-robot). Readers are best effort and volatile: they match reliable and best-effort
-writers alike (a reliable reader would get nothing from a best-effort sensor); a
-latched message published before the bridge started is not received.
+robot). It hears Fast DDS publishers (ROS 2's default middleware) as well as
+Cyclone ones: see ``domain_config``. Readers are best effort and volatile: they match
+reliable and best-effort writers alike (a reliable reader would get nothing from a
+best-effort sensor); a latched message published before the bridge started is not
+received.
 
 State topics (odometry, IMU, scan, ...) publish far faster than events are built and
 only their latest value counts: their readers keep one sample, in Cyclone's C cache,
@@ -35,14 +37,33 @@ from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 log = logging.getLogger(__name__)
 
 READER_DEPTH = 100
-LOCALHOST_CONFIG = (
-    "<CycloneDDS><Domain id='any'><General><Interfaces>"
-    "<NetworkInterface address='127.0.0.1'/></Interfaces>"
+# Fast DDS announces XTypes type information that Cyclone DDS rejects ("invalid type
+# object"), and a reader whose writer's type cannot be resolved never matches: not one
+# sample. With eProsima's information ignored (1.15 is its DDS vendor id), type names
+# decide, as they do for rmw_cyclonedds, whose types carry no type information.
+FAST_DDS_TYPES_BY_NAME = (
+    "<Compatibility><IgnoreTypeInformation>1.15</IgnoreTypeInformation></Compatibility>"
+)
+LOCALHOST_ONLY = (
+    "<General><Interfaces><NetworkInterface address='127.0.0.1'/></Interfaces>"
     "<AllowMulticast>false</AllowMulticast></General>"
     "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
     "<MaxAutoParticipantIndex>64</MaxAutoParticipantIndex>"
-    "<Peers><Peer address='localhost'/></Peers></Discovery></Domain></CycloneDDS>"
+    "<Peers><Peer address='localhost'/></Peers></Discovery>"
 )
+
+
+def domain_config(localhost_only: bool, cyclonedds_uri: str = "") -> str:
+    """The Cyclone configuration of the input's domain: the user's ``CYCLONEDDS_URI``
+    (kept: Cyclone merges a comma-separated list), then Fast DDS interoperability and,
+    if asked, loopback only."""
+    ours = (
+        "<CycloneDDS><Domain id='any'>"
+        + FAST_DDS_TYPES_BY_NAME
+        + (LOCALHOST_ONLY if localhost_only else "")
+        + "</Domain></CycloneDDS>"
+    )
+    return f"{cyclonedds_uri},{ours}" if cyclonedds_uri.strip() else ours
 
 
 def domain_settings(env: Mapping[str, str]) -> tuple[int, bool]:
@@ -72,6 +93,7 @@ class DdsReaders:
         domain_id: int,
         localhost_only: bool,
         extras: Mapping[str, tuple[str, str]] | None = None,
+        cyclonedds_uri: str = "",
     ) -> None:
         try:
             from cyclonedds.core import Listener, Policy, Qos
@@ -86,7 +108,7 @@ class DdsReaders:
                 "BRIDGE_INPUT=dds: needs cyclonedds (pip install 'phytrace-edge[dds]')"
             ) from None
         # the Domain object carries the configuration: it must live as long as the readers
-        self._domain = Domain(domain_id, LOCALHOST_CONFIG) if localhost_only else None
+        self._domain = Domain(domain_id, domain_config(localhost_only, cyclonedds_uri))
         self.participant: Any = DomainParticipant(domain_id)
         self._on_message = on_message
         self.readers: list[Any] = []
@@ -191,6 +213,7 @@ class DdsSource:
             self._options.dds_domain_id,
             self._options.dds_localhost_only,
             self._options.extra_topics,
+            self._options.dds_cyclonedds_uri,
         )
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
