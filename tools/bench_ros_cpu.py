@@ -68,9 +68,9 @@ def bare(stop: threading.Event) -> None:
         node.create_subscription(message, topic, lambda msg: None, qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    while not stop.is_set():
+    while not stop.is_set() and rclpy.ok():  # SIGTERM ends it: rclpy's own handler
         executor.spin_once(timeout_sec=0.1)
-    rclpy.shutdown()
+    rclpy.try_shutdown()
 
 
 def measure(command: list[str], env: dict[str, str], seconds: float) -> float:
@@ -101,7 +101,13 @@ def main() -> None:
     except ImportError:
         sys.exit("rclpy is not importable: source ROS 2 first (see the docstring)")
     workdir = Path(tempfile.mkdtemp(prefix="bench-ros-"))
-    env = {**os.environ, "ROS_DOMAIN_ID": "217", "PYTHONUNBUFFERED": "1"}
+    env = {  # a private domain, its discovery confined to loopback
+        **os.environ,
+        "ROS_DOMAIN_ID": "217",
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "ROS_LOCALHOST_ONLY": "1",
+        "PYTHONUNBUFFERED": "1",
+    }
     robot = subprocess.Popen(
         [sys.executable, __file__, "--child", "publish"], stdin=subprocess.PIPE, env=env
     )

@@ -1,12 +1,17 @@
-"""phytrace-edge attached to a running robot: ``ros2 launch <this file> name:=value ...``.
+"""phytrace-edge attached to a running robot: ``ros2 launch phytrace_edge
+bridge_only.launch.py name:=value ...`` (or the path of this file, for a pip install).
 
-    ros2 launch bridge_only.launch.py phycloud_endpoint:=https://api.phycloud.phyware.io/v1 \
+    ros2 launch phytrace_edge bridge_only.launch.py \
+        phycloud_endpoint:=https://api.phycloud.phyware.io/v1 \
         source_id:=my-robot-1 source_type:=amr fleet_id:=my-fleet sample_rate_hz:=10.0
 
 Every argument becomes a ROS parameter of the same name as the setting (docs/configuration.md),
 below flags, environment and config file in precedence. Prefer PHYCLOUD_API_KEY in the
 environment to phycloud_api_key:=...: process arguments are visible to every user of the robot.
 """
+
+import os
+from pathlib import Path
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
@@ -26,6 +31,18 @@ ARGUMENTS = {
 BRIDGE_INPUT = "ros"
 
 
+def bridge_executable() -> str:
+    """``phytrace-edge`` as the ROS package installs it (colcon: ``lib/phytrace_edge``
+    under the package's prefix), else, for a pip install, the one on PATH."""
+    try:
+        from ament_index_python.packages import get_package_prefix
+
+        prefix = get_package_prefix("phytrace_edge")
+    except (ImportError, LookupError):  # PackageNotFoundError is a KeyError
+        return "phytrace-edge"
+    return str(Path(prefix) / "lib" / "phytrace_edge" / "phytrace-edge")
+
+
 def bridge_command(bridge_input: str, values: dict) -> list:
     """``phytrace-edge run`` with each argument that was given as ``-p name:=value``. An
     unset one is left out: rcl refuses an empty ``-p name:=`` and the bridge would not
@@ -34,15 +51,30 @@ def bridge_command(bridge_input: str, values: dict) -> list:
     for name in ARGUMENTS:
         if values.get(name):
             parameters += ["-p", f"{name}:={values[name]}"]
-    command = ["phytrace-edge", "run", "--input", bridge_input]
+    command = [bridge_executable(), "run", "--input", bridge_input]
     return command + (["--ros-args", *parameters] if parameters else [])
+
+
+def bridge_environment(environment: dict) -> dict:
+    """The bridge's environment: launch's own, less ``WATCHDOG_PID``. Under systemd
+    (``systemd/phytrace-edge-ros2.service``) ``ros2 launch`` is the main process, so
+    systemd names it there; the bridge, which alone knows whether it makes progress,
+    takes the watchdog over (the unit's ``NotifyAccess=all`` accepts its pings)."""
+    return {name: value for name, value in environment.items() if name != "WATCHDOG_PID"}
 
 
 def bridge_process(context, bridge_input: str) -> list:
     """The bridge's process, built once the arguments' values are known."""
     values = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
     command = bridge_command(bridge_input, values)
-    return [ExecuteProcess(cmd=command, output="screen", sigterm_timeout="20")]
+    return [
+        ExecuteProcess(
+            cmd=command,
+            env=bridge_environment(dict(os.environ)),
+            output="screen",
+            sigterm_timeout="20",
+        )
+    ]
 
 
 def launch_description(bridge_input: str) -> LaunchDescription:

@@ -1,7 +1,7 @@
 """phytrace-edge with the simulated delivery robot (no robot needed):
 
-    ros2 launch delivery_robot.launch.py phycloud_endpoint:=http://localhost:8000/api/v1 \
-        source_id:=sim-robot-1
+    ros2 launch phytrace_edge delivery_robot.launch.py \
+        phycloud_endpoint:=http://localhost:8000/api/v1 source_id:=sim-robot-1
 
 The simulated robot runs inside the bridge process on the mock ROS layer, so this works
 on a machine with or without a ROS graph. The arguments are those of bridge_only.launch.py.

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import threading
 import typing
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -25,11 +26,13 @@ from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources import dds_types
 from phytrace_edge.ingest.sources.base import Feed
-from phytrace_edge.ingest.sources.dds import DdsSource, domain_settings
+from phytrace_edge.ingest.sources.dds import DdsSource, domain_config, domain_settings
 from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
-from tests.unit.test_generic import KNOWN
+from tests.ros.known import KNOWN, check_known_event
+from tests.ros.rig import Robot, rclpy_missing, ros_env
+from tests.unit.test_generic import KNOWN as KNOWN_EXTRA
 
 PUBLISHER = str(Path(__file__).with_name("dds_publisher.py"))
 
@@ -91,51 +94,79 @@ def test_ros_environment_picks_the_domain_and_loopback() -> None:
         domain_settings({"ROS_DOMAIN_ID": "seven"})
 
 
+def test_the_domain_config_hears_fast_dds_and_keeps_the_users_own() -> None:
+    anywhere, loopback = domain_config(localhost_only=False), domain_config(localhost_only=True)
+    assert "<IgnoreTypeInformation>1.15</IgnoreTypeInformation>" in anywhere
+    assert "127.0.0.1" not in anywhere and "<NetworkInterface address='127.0.0.1'/>" in loopback
+    merged = domain_config(False, "file:///etc/cyclonedds.xml")
+    assert merged == "file:///etc/cyclonedds.xml," + anywhere  # Cyclone merges the list
+
+
 def topic_events(events: list[dict]) -> dict[str, dict]:
     """The latest telemetry.topic event of each topic."""
     return {e["topic"]: e for e in events if e["event_type"] == "telemetry.topic"}
 
 
-def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> None:
-    domain = str(random.Random(os.getpid()).randint(100, 200))  # private to this test
-    monkeypatch.setenv("ROS_DOMAIN_ID", domain)
-    monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
+class DdsInput:
+    """The dds input, its builder and sample tick, in this process; events in memory."""
+
+    def __init__(self, env: dict[str, str], extras: str = "") -> None:
+        settings = load_settings(
+            env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds", "TOPICS_EXTRA": extras}
+        ).settings
+        self.events: list[dict] = []
+        self.source = DdsSource(wiring.source_options(settings, env))
+        builder = UDMBuilder(wiring.builder_options(settings), field_types=self.source.field_types)
+        self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
+        sampler = Sampler(
+            builder,
+            lambda built: self.events.append(built.event),
+            10,
+            before_tick=self.source.before_tick,
+        )
+        self._stop = threading.Event()
+        self.source.start(Feed(self.dispatcher.on_message, sampler.tick, sampler.period_s))
+        threading.Thread(target=sampler.run, args=(self._stop,), daemon=True).start()
+
+    def event_with_every_domain(self, during: Callable[[], None] = lambda: None) -> dict:
+        def found() -> dict | None:
+            during()
+            return next((e for e in reversed(self.events) if set(DOMAINS) <= set(e)), None)
+
+        return wait_for(found, 60, "an event with every domain", every=0.2)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.source.stop()
+
+
+def private_loopback_domain() -> dict[str, str]:
+    domain = str(random.Random().randint(100, 200))  # private to this test
+    return {"ROS_DOMAIN_ID": domain, "ROS_LOCALHOST_ONLY": "1"}
+
+
+def test_events_from_a_real_dds_publisher() -> None:
+    ros = private_loopback_domain()
     publisher = subprocess.Popen(
         [sys.executable, PUBLISHER],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-        env=python_env(ROS_DOMAIN_ID=domain, ROS_LOCALHOST_ONLY="1"),
+        env=python_env(**ros),
     )
-    events: list[dict] = []
-    source = None
-    stop = threading.Event()
+    heard = None
     try:
         assert publisher.stdout.readline().strip() == "ready"
-        extras = (
+        heard = DdsInput(
+            ros,
             "/motor/temperature type=sensor_msgs/msg/Temperature rate_hz=50; "
             "/tf type=tf2_msgs/msg/TFMessage rate_hz=50; "
             "/cells type=std_msgs/msg/Float32MultiArray rate_hz=50; "
             "/camera type=sensor_msgs/msg/CompressedImage rate_hz=50; "
-            "/no/type; /vendor type=acme_msgs/msg/Unknown"
+            "/no/type; /vendor type=acme_msgs/msg/Unknown",
         )
-        settings = load_settings(
-            env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds", "TOPICS_EXTRA": extras}
-        ).settings
-        source = DdsSource(wiring.source_options(settings, os.environ))
-        builder = UDMBuilder(wiring.builder_options(settings), field_types=source.field_types)
-        dispatcher = Dispatcher(builder.add_reading, builder.add_message)
-        sampler = Sampler(
-            builder, lambda built: events.append(built.event), 10, before_tick=source.before_tick
-        )
-        source.start(Feed(dispatcher.on_message, sampler.tick, sampler.period_s))
-        threading.Thread(target=sampler.run, args=(stop,), daemon=True).start()
-        wanted = set(DOMAINS)
-        event = wait_for(
-            lambda: next((e for e in reversed(events) if wanted <= set(e)), None),
-            60,
-            "an event with every domain",
-        )
+        events, source, dispatcher = heard.events, heard.source, heard.dispatcher
+        event = heard.event_with_every_domain()
         wait_for(
             lambda: (
                 {"/motor/temperature", "/tf", "/cells", "/camera"} <= topic_events(events).keys()
@@ -157,42 +188,18 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
         )
         assert dict(dispatcher.rejected) == rejected_before == {}
     finally:
-        stop.set()
-        if source is not None:
-            source.stop()
+        if heard is not None:
+            heard.close()
         if publisher.poll() is None:
             publisher.stdin.close()
             publisher.wait(timeout=20)
     assert find_violation(event) is None
-    assert event["location"]["local"] == pytest.approx(
-        {"coordinate_frame": "odom", "x_m": 12.34, "y_m": 5.67, "z_m": 0.0, "yaw_deg": 45.2}
-    )
-    assert event["location"]["latitude"] == 41.8781
-    assert event["motion"]["linear_velocity"]["x_mps"] == 0.85
-    assert event["motion"]["commanded_velocity"] == {
-        "linear_x_mps": 1.0,
-        "linear_y_mps": 0.0,
-        "angular_z_rps": -0.5,
-    }
-    battery = event["power"]["battery"]
-    assert battery["state_of_charge_pct"] == pytest.approx(82.5)
-    assert battery["voltage_v"] == pytest.approx(24.1, rel=1e-6)
-    assert "charge_ah" not in battery  # NaN on the wire
-    lidar = event["perception"]["lidar"][0]
-    assert (lidar["num_points"], lidar["valid_points"]) == (5, 2)
-    assert lidar["closest_range_m"] == pytest.approx(0.5)
-    assert event["perception"]["imu"]["orientation_deg"]["yaw"] == pytest.approx(30.0)
-    errors = event["operational"]["errors"]
-    assert [(e["name"], e["level"]) for e in errors] == [("motor", "error")]
-    assert event["navigation"]["goal"]["x_m"] == 45.0
-    assert [j["name"] for j in event["actuators"]["joints"]] == ["left_wheel", "right_wheel"]
-    assert event["payload"]["delivery_state"] == "in_transit"
-    assert event["location"]["sources"][0]["stamp"] == "2025-11-13T02:13:20.500Z"
+    check_known_event(event)
     received = dispatcher.received
     assert received["/odom"] > 0 and received["/battery_state"] > 0  # best effort and reliable
     # TOPICS_EXTRA through Cyclone DDS: the same JSON as rclpy and rosbags give
     by_topic = topic_events(events)
-    for make, expected in KNOWN:
+    for make, expected in KNOWN_EXTRA:
         name = make()._type
         topic = next(t for t, e in by_topic.items() if e["type"] == name)
         assert by_topic[topic]["data"] == expected, topic
@@ -206,3 +213,33 @@ def test_events_from_a_real_dds_publisher(monkeypatch: pytest.MonkeyPatch) -> No
         "overcurrent",
         7,
     )
+
+
+def test_events_from_a_fast_dds_publisher(tmp_path: Path) -> None:
+    """ROS 2's default middleware: a real rclpy robot on rmw_fastrtps_cpp (the Kilted
+    wheels) publishes the ten topics; the dds input, on Cyclone DDS, hears every value
+    (Fast DDS's type information would stop Cyclone from matching: see the input's
+    ``domain_config``)."""
+    if missing := rclpy_missing():
+        if os.environ.get("CI"):
+            pytest.fail(missing)
+        pytest.skip(missing)
+    ros = ros_env(random.Random().randint(100, 200), tmp_path / "ros-logs")
+    robot = Robot("rclpy", ros, tmp_path / "robot.log")
+    heard = None
+    try:
+        publishers = {t: robot.publisher(t, kind, qos) for t, (kind, qos, _) in KNOWN.items()}
+
+        def publish_all() -> None:  # as a robot does, again and again
+            for topic, (_, _, fields) in KNOWN.items():
+                robot.publish(publishers[topic], fields)
+
+        heard = DdsInput(ros)
+        event = heard.event_with_every_domain(during=publish_all)
+    finally:
+        if heard is not None:
+            heard.close()
+        robot.close()
+    assert find_violation(event) is None
+    check_known_event(event)
+    assert heard.dispatcher.received["/odom"] > 0 and heard.dispatcher.received["/diagnostics"] > 0

@@ -72,6 +72,37 @@ def test_unit_verifies(tmp_path: Path) -> None:
     assert "phytrace-edge.service" not in result.stderr, result.stderr
 
 
+ROS2_LAUNCH = ROOT / "systemd" / "phytrace-edge.service.d" / "ros2-launch.conf.example"
+
+
+def test_the_ros2_launch_drop_in_runs_the_package_and_keeps_the_watchdog() -> None:
+    parser = configparser.ConfigParser(strict=False, interpolation=None)
+    parser.optionxform = str  # type: ignore[assignment,method-assign]
+    parser.read([UNIT, ROS2_LAUNCH])  # what systemd does: the drop-in after the unit
+    service = parser["Service"]
+    assert "exec ros2 launch phytrace_edge bridge_only.launch.py" in service["ExecStart"]
+    assert service["NotifyAccess"] == "all"  # the bridge is ros2 launch's child
+    assert service["Type"] == "notify" and int(service["WatchdogSec"]) > 0
+    assert service["User"] == "phytrace" and service["ProtectSystem"] == "strict"
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze is missing")
+def test_the_unit_with_the_ros2_launch_drop_in_verifies(tmp_path: Path) -> None:
+    units = tmp_path / "units"
+    (units / "phytrace-edge.service.d").mkdir(parents=True)
+    (units / "phytrace-edge.service").write_text(UNIT.read_text())
+    (units / "phytrace-edge.service.d" / "ros2-launch.conf").write_text(ROS2_LAUNCH.read_text())
+    result = subprocess.run(
+        ["systemd-analyze", "verify", str(units / "phytrace-edge.service")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=os.environ | {"SYSTEMD_UNIT_PATH": f"{units}:"},
+    )
+    assert result.returncode == 0, result.stderr
+    assert "phytrace-edge.service" not in result.stderr, result.stderr
+
+
 def test_sd_notify_ready_watchdog_and_stopping(tmp_path: Path, stub) -> None:
     address = str(tmp_path / "notify.sock")
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)

@@ -51,8 +51,8 @@ def fake_launch(monkeypatch: pytest.MonkeyPatch) -> None:
         monkeypatch.setitem(sys.modules, name, module)
 
 
-def launched_command(file: str, given: dict[str, str]) -> list[str]:
-    """The bridge's command line when ``file`` is launched with the arguments ``given``."""
+def launched_process(file: str, given: dict[str, str]) -> Recorded:
+    """The bridge's ExecuteProcess when ``file`` is launched with the arguments ``given``."""
     description = runpy.run_path(str(LAUNCH / file))["generate_launch_description"]()
     actions = description.args[0]
     declared = {
@@ -61,7 +61,12 @@ def launched_command(file: str, given: dict[str, str]) -> list[str]:
     assert set(declared) == REFERENCE
     (opaque,) = [a for a in actions if "function" in a.kwargs]
     (process,) = opaque.kwargs["function"]({**declared, **given}, *opaque.kwargs["args"])
-    return process.kwargs["cmd"]
+    return process
+
+
+def launched_command(file: str, given: dict[str, str]) -> list[str]:
+    """The bridge's command line when ``file`` is launched with the arguments ``given``."""
+    return launched_process(file, given).kwargs["cmd"]
 
 
 @pytest.mark.parametrize(
@@ -89,3 +94,20 @@ def test_no_arguments_means_no_ros_args(fake_launch) -> None:
         "--input",
         "ros",
     ]
+
+
+def test_under_systemd_the_bridge_takes_the_watchdog_over(
+    fake_launch, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``ros2 launch`` is the unit's main process, so systemd's WATCHDOG_PID names it;
+    the bridge gets the rest of the environment without it, and so sends the pings."""
+    monkeypatch.setenv("WATCHDOG_PID", "4242")
+    monkeypatch.setenv("WATCHDOG_USEC", "30000000")
+    monkeypatch.setenv("NOTIFY_SOCKET", "/run/systemd/notify")
+    env = launched_process("bridge_only.launch.py", {}).kwargs["env"]
+    assert "WATCHDOG_PID" not in env
+    assert env["WATCHDOG_USEC"] == "30000000" and env["NOTIFY_SOCKET"] == "/run/systemd/notify"
+    from phytrace_edge.runtime.sd_notify import SystemdNotifier
+
+    assert SystemdNotifier(env).watchdog_s == 30.0
+    assert SystemdNotifier(dict(env, WATCHDOG_PID="4242")).watchdog_s is None  # as before

@@ -1,0 +1,31 @@
+"""The ``rig`` fixture: each test of this folder on the mock and on real rclpy."""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.processes import StubProcess
+from tests.ros.rig import Rig, rclpy_missing
+
+FLAVOURS = ("mock", "rclpy")
+
+
+@functools.cache
+def why_no_rclpy() -> str | None:
+    return rclpy_missing()
+
+
+@pytest.fixture(params=FLAVOURS)
+def rig(request: pytest.FixtureRequest, tmp_path: Path, stub: StubProcess) -> Iterator[Rig]:
+    if request.param == "rclpy" and (missing := why_no_rclpy()):
+        if os.environ.get("CI"):  # in CI the real thing must run, never skip
+            pytest.fail(missing)
+        pytest.skip(missing)
+    graph = Rig(request.param, tmp_path, stub)
+    yield graph
+    graph.close()

@@ -1,0 +1,226 @@
+"""A ROS graph for the tests: a robot node, the bridge's ``ros`` input, the stub.
+
+The same test bodies run on two graphs:
+
+- ``rclpy``: real rclpy (ROS 2 Kilted wheels, Fast DDS) from ``.venv-ros``, which
+  ``tools/test.py`` installs. The robot and the bridge are two processes on a private
+  ROS domain confined to loopback.
+- ``mock``: the mock rclpy installed as ``rclpy`` in one process that is both the
+  robot and, once started, the bridge (the mock's graph lives in one process).
+
+Either way the bridge is ``phytrace-edge run --input ros``, unchanged, sending to a
+real stub over loopback, and the test sees what an operator sees: the events at the
+stub, ``status``, the exit code and the log.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from tests.processes import ROOT, StubProcess, python_env, wait_for
+
+ROS_PYTHON = ROOT / ".venv-ros" / "bin" / "python"
+ROBOT = str(Path(__file__).with_name("robot.py"))
+EVENT_WAIT_S = 60.0
+
+
+def rclpy_missing() -> str | None:
+    """Why real rclpy cannot run here, or None."""
+    if not ROS_PYTHON.exists():
+        return f"no {ROS_PYTHON}: python3 tools/test.py installs the ROS 2 wheels there"
+    probe = subprocess.run(
+        [str(ROS_PYTHON), "-c", "import rclpy, sensor_msgs.msg, phytrace_edge"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    if probe.returncode != 0:
+        return f"rclpy does not import in {ROS_PYTHON}: {probe.stderr.strip().splitlines()[-1:]}"
+    return None
+
+
+def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
+    """A private ROS domain on loopback only (no discovery traffic leaves the host)."""
+    return {
+        "ROS_DOMAIN_ID": str(domain),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+        "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp",
+        "ROS_LOG_DIR": str(log_dir),
+    }
+
+
+class Robot:
+    """``robot.py`` in a process of its own: real rclpy (``rclpy``) or the mock
+    (``mock``: that process also runs the bridge, when told)."""
+
+    def __init__(self, flavour: str, env: dict[str, str], log: Path) -> None:
+        self.python = str(ROS_PYTHON) if flavour == "rclpy" else sys.executable
+        with log.open("a") as stderr:
+            self.process = subprocess.Popen(
+                [self.python, ROBOT, *(["--mock"] if flavour == "mock" else [])],
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=stderr,
+                text=True,
+                env=python_env(**env),
+            )
+        self.log = log
+        assert self._answer() == "ready"
+
+    def _answer(self) -> Any:
+        line = self.process.stdout.readline()  # type: ignore[union-attr]
+        if not line:
+            raise AssertionError(f"the robot exited ({self.process.poll()}); see {self.log}")
+        answer = json.loads(line)
+        if not answer["ok"]:
+            raise AssertionError(f"robot: {answer['error']}")
+        return answer["result"]
+
+    def command(self, op: str, **args: Any) -> Any:
+        self.process.stdin.write(json.dumps({"op": op, **args}) + "\n")  # type: ignore[union-attr]
+        self.process.stdin.flush()  # type: ignore[union-attr]
+        return self._answer()
+
+    def publisher(self, topic: str, type_name: str, qos: str) -> int:
+        return int(self.command("publisher", topic=topic, type=type_name, qos=qos))
+
+    def publish(self, publisher: int, fields: dict[str, Any], matched_within_s: float = 0) -> int:
+        return int(
+            self.command("publish", id=publisher, fields=fields, matched_within_s=matched_within_s)
+        )
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait(timeout=20)
+
+
+class Rig:
+    """A robot, a bridge to start, and the stub it sends to."""
+
+    def __init__(self, flavour: str, tmp: Path, stub: StubProcess) -> None:
+        self.flavour, self.tmp, self.stub = flavour, tmp, stub
+        self.queue_path = tmp / "queue.db"
+        self.bridge_log = tmp / "bridge.log"
+        self.env = ros_env(random.Random().randint(1, 200), tmp / "ros-logs")
+        self.settings: dict[str, str] = {}
+        # on the mock, the robot's process becomes the bridge: one log
+        robot_log = self.bridge_log if flavour == "mock" else tmp / "robot.log"
+        self.robot = Robot(flavour, self.env, robot_log)
+        self.command = self.robot.command
+        self.publisher = self.robot.publisher
+        self.publish = self.robot.publish
+        self.bridge: subprocess.Popen[bytes] | None = None
+
+    def parameters(self, node: str, call: str, answer_s: float = 2.0, **args: Any) -> Any:
+        return self.command("parameters", node=node, call=call, answer_s=answer_s, **args)
+
+    # the bridge
+    def start_bridge(
+        self,
+        *ros_args: str,
+        command: list[str] | None = None,
+        process_env: dict[str, str] | None = None,
+        **settings: str,
+    ) -> None:
+        """``phytrace-edge run --input ros`` with the rig's settings (``settings``
+        replace them; "" unsets one). On real rclpy, ``command`` and ``process_env``
+        replace the module's command and environment (an installed executable)."""
+        self.settings = {
+            "PHYCLOUD_ENDPOINT": self.stub.endpoint,
+            "PHYCLOUD_API_KEY": "phk_test_secret_key",
+            "QUEUE_PATH": str(self.queue_path),
+            "SOURCE_ID": f"ros-{self.flavour}",
+            "SAMPLE_RATE_HZ": "5",
+            "FLUSH_INTERVAL_S": "0.3",
+            "RETRY_MIN_S": "0.05",
+            "RETRY_MAX_S": "0.5",
+            "HEALTH_EVENT_INTERVAL_S": "0",
+            **settings,
+        }
+        self.settings = {k: v for k, v in self.settings.items() if v}  # "" = leave unset
+        argv = ["run", "--input", "ros", *(["--ros-args", *ros_args] if ros_args else [])]
+        if self.flavour == "mock":
+            self.command("start_bridge", argv=argv, env=self.settings)
+            return
+        command = command or [self.robot.python, "-m", "phytrace_edge", "run"]
+        env = (process_env or python_env()) | self.env | self.settings
+        with self.bridge_log.open("a") as log:
+            self.bridge = subprocess.Popen([*command, *argv[1:]], stdout=log, stderr=log, env=env)
+
+    @property
+    def bridge_process(self) -> subprocess.Popen[Any]:
+        process = self.robot.process if self.flavour == "mock" else self.bridge
+        assert process is not None, "start_bridge() first"
+        return process
+
+    def stop_bridge(self, signum: int = signal.SIGTERM, timeout: float = 60) -> tuple[int, str]:
+        """Signal the bridge; its exit code and everything it logged."""
+        os.kill(self.bridge_process.pid, signum)
+        code = self.bridge_process.wait(timeout=timeout)
+        return code, self.bridge_log.read_text()
+
+    def status(self, *flags: str) -> tuple[int, str]:
+        result = subprocess.run(
+            [sys.executable, "-m", "phytrace_edge", "status", *flags],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=python_env(QUEUE_PATH=str(self.queue_path)),
+        )
+        return result.returncode, result.stdout
+
+    def status_json(self) -> dict[str, Any]:
+        _, out = self.status("--json")
+        return json.loads(out) if out else {}
+
+    def publish_until(
+        self, publisher: int, fields: dict[str, Any], predicate: Any, what: str
+    ) -> Any:
+        """Publish again and again, as a sensor does, until an event satisfies
+        ``predicate``; that event."""
+
+        def found() -> Any:
+            self._bridge_alive()
+            self.publish(publisher, fields)
+            return next((e for e in reversed(self.events()) if predicate(e)), None)
+
+        return wait_for(found, EVENT_WAIT_S, what, every=0.2)
+
+    def wait_running(self) -> None:
+        """Until the bridge's heartbeat says it runs (a robot that publishes nothing
+        gives no events to wait for)."""
+        wait_for(
+            lambda: self._bridge_alive() or self.status_json().get("running"),
+            EVENT_WAIT_S,
+            "the bridge to run",
+            every=0.2,
+        )
+
+    def events(self, event_type: str = "telemetry.periodic") -> list[dict[str, Any]]:
+        return [e for e in self.stub.events() if e["event_type"] == event_type]
+
+    def wait_event(self, predicate: Any, what: str, event_type: str = "telemetry.periodic") -> Any:
+        def found() -> Any:
+            self._bridge_alive()
+            return next((e for e in reversed(self.events(event_type)) if predicate(e)), None)
+
+        return wait_for(found, EVENT_WAIT_S, what, every=0.2)
+
+    def _bridge_alive(self) -> None:
+        code = self.bridge_process.poll()
+        if code is not None:
+            raise AssertionError(f"the bridge exited ({code}):\n{self.bridge_log.read_text()}")
+
+    def close(self) -> None:
+        if self.bridge is not None and self.bridge.poll() is None:
+            self.bridge.kill()
+            self.bridge.wait(timeout=20)
+        self.robot.close()
