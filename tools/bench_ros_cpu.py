@@ -11,8 +11,10 @@ Prints a table: % of one core for each, and the ratio (goal: <= 1.0).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -60,15 +62,18 @@ def bare(stop: threading.Event) -> None:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init()
+    # stops on SIGTERM like the bridge: its own handler, none of rclpy's
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())
     node = rclpy.create_node("bare_subscriber")
     for topic, (module, name) in TYPES.items():
         message = getattr(importlib.import_module(module), name)
         node.create_subscription(message, topic, lambda msg: None, qos_profile_sensor_data)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    while not stop.is_set() and rclpy.ok():  # SIGTERM ends it: rclpy's own handler
+    while not stop.is_set():
         executor.spin_once(timeout_sec=0.1)
     rclpy.try_shutdown()
 
@@ -82,8 +87,24 @@ def measure(command: list[str], env: dict[str, str], seconds: float) -> float:
         time.sleep(seconds)
         return 100 * (cpu_seconds(process.pid) - before) / (time.monotonic() - started)
     finally:
+        if "QUEUE_PATH" in env:  # the bridge: say what it heard, or the figure means nothing
+            print(heard(env), flush=True)
         process.terminate()
         process.wait(timeout=30)
+
+
+def heard(env: dict[str, str]) -> str:
+    """The messages the running bridge received per topic, from its status."""
+    status = subprocess.run(
+        [sys.executable, "-m", "phytrace_edge", "status", "--json"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    topics = json.loads(status.stdout).get("topics", {}) if status.stdout else {}
+    counts = ", ".join(f"{t} {topics[t].get('received', 0)}" for t in RATES_HZ if t in topics)
+    return f"the bridge heard: {counts or 'nothing'}"
 
 
 def main() -> None:

@@ -4,7 +4,6 @@ private domain confined to loopback; and the IDL types against the Jazzy definit
 from __future__ import annotations
 
 import os
-import random
 import subprocess
 import sys
 import threading
@@ -31,7 +30,7 @@ from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
 from tests.ros.known import KNOWN, check_known_event
-from tests.ros.rig import Robot, rclpy_missing, ros_env
+from tests.ros.rig import Robot, private_domain, rclpy_missing, ros_env
 from tests.unit.test_generic import KNOWN as KNOWN_EXTRA
 
 PUBLISHER = str(Path(__file__).with_name("dds_publisher.py"))
@@ -141,8 +140,7 @@ class DdsInput:
 
 
 def private_loopback_domain() -> dict[str, str]:
-    domain = str(random.Random().randint(100, 200))  # private to this test
-    return {"ROS_DOMAIN_ID": domain, "ROS_LOCALHOST_ONLY": "1"}
+    return {"ROS_DOMAIN_ID": str(private_domain()), "ROS_LOCALHOST_ONLY": "1"}
 
 
 def test_events_from_a_real_dds_publisher() -> None:
@@ -224,7 +222,7 @@ def test_events_from_a_fast_dds_publisher(tmp_path: Path) -> None:
         if os.environ.get("CI"):
             pytest.fail(missing)
         pytest.skip(missing)
-    ros = ros_env(random.Random().randint(100, 200), tmp_path / "ros-logs")
+    ros = ros_env(private_domain(), tmp_path / "ros-logs")
     robot = Robot("rclpy", ros, tmp_path / "robot.log")
     heard = None
     try:

@@ -27,6 +27,15 @@ from typing import Any
 from tests.processes import ROOT, StubProcess, python_env, wait_for
 
 ROS_PYTHON = ROOT / ".venv-ros" / "bin" / "python"
+# every graph of a test session gets a domain of its own: a participant killed by an
+# earlier test lingers in its domain until its lease runs out
+_DOMAINS = iter(random.Random().sample(range(1, 200), 199))
+
+
+def private_domain() -> int:
+    return next(_DOMAINS)
+
+
 ROBOT = str(Path(__file__).with_name("robot.py"))
 EVENT_WAIT_S = 60.0
 
@@ -97,9 +106,19 @@ class Robot:
         )
 
     def close(self) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(timeout=20)
+        """End of stdin: the robot leaves the graph cleanly; killed if it does not."""
+        stop_by_pid(self.process, lambda: self.process.stdin.close())  # type: ignore[union-attr]
+
+
+def stop_by_pid(process: subprocess.Popen[Any], ask: Any, grace_s: float = 10) -> None:
+    """``ask`` the process to end, then kill it if it has not within ``grace_s``."""
+    if process.poll() is None:
+        ask()
+        try:
+            process.wait(timeout=grace_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(timeout=20)
 
 
 class Rig:
@@ -109,7 +128,7 @@ class Rig:
         self.flavour, self.tmp, self.stub = flavour, tmp, stub
         self.queue_path = tmp / "queue.db"
         self.bridge_log = tmp / "bridge.log"
-        self.env = ros_env(random.Random().randint(1, 200), tmp / "ros-logs")
+        self.env = ros_env(private_domain(), tmp / "ros-logs")
         self.settings: dict[str, str] = {}
         # on the mock, the robot's process becomes the bridge: one log
         robot_log = self.bridge_log if flavour == "mock" else tmp / "robot.log"
@@ -220,7 +239,8 @@ class Rig:
             raise AssertionError(f"the bridge exited ({code}):\n{self.bridge_log.read_text()}")
 
     def close(self) -> None:
-        if self.bridge is not None and self.bridge.poll() is None:
-            self.bridge.kill()
-            self.bridge.wait(timeout=20)
+        """Stop the bridge as systemd would, then the robot (killed if they linger)."""
+        if self.settings:  # started: on the mock, in the robot's own process
+            bridge = self.bridge_process
+            stop_by_pid(bridge, lambda: bridge.send_signal(signal.SIGTERM))
         self.robot.close()
