@@ -6,11 +6,13 @@ queue (durable SQLite WAL) -> ship (batched HTTP to PhyCloud).
 
 from __future__ import annotations
 
+from phytrace_edge._version import __version__
+
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing: starts faster
 if TYPE_CHECKING:
     from typing import Any
 
-__version__ = "0.1.0"
+__all__ = ["__version__", "run_simulation"]
 
 
 def run_simulation(num_ticks: int = 100, **kwargs: Any) -> dict[str, Any]:

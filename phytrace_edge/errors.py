@@ -10,7 +10,8 @@ that line and exits with the error's ``exit_code``; it never prints a traceback 
     ├── MalformedMessage     a ROS message cannot be turned into a reading
     ├── QueueError           the queue database cannot do what was asked
     │   ├── QueueBusyError   another process held the write lock past the busy timeout
-    │   └── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
+    │   ├── QueueFullError   the disk is full (SQLITE_FULL) for a write that must happen
+    │   └── QueueDamagedError  SQLite found the file corrupt, or not a database
     └── SendError            a batch did not reach PhyCloud this time
         └── TransientSendError   retry it: 408/425/429/5xx, timeouts, connection errors
             ├── UnexpectedAnswerError  retry it: a 2xx that is not PhyCloud's answer

@@ -40,7 +40,6 @@ class Sampler:
         self._before_tick = before_tick
         self._monotonic = monotonic
         self.ticks = 0
-        self.empty_ticks = 0
 
     def tick(self, captured_at_s: float | None = None) -> bool:
         """Build and emit the event of this tick; ``captured_at_s`` overrides the wall
@@ -53,7 +52,6 @@ class Sampler:
         self.flush_side_events(captured_at_s)
         built = self.builder.build(captured_at_s)
         if not any(domain in built.event for domain in DOMAINS):
-            self.empty_ticks += 1
             return False
         self._emit(built)
         return True

@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from phytrace_edge import __version__
+from phytrace_edge._version import __version__
 from phytrace_edge.cli import common
 from phytrace_edge.config import ros_parameters, settings_from_environment
 from phytrace_edge.errors import EXIT_INTERRUPTED, EXIT_OK, PhytraceError

@@ -49,7 +49,7 @@ def checked(parse: Callable[[Any], Any], what: str) -> Callable[[str], Any]:
     return convert
 
 
-# flags that keep another name working: DESIGN.md and the docs say --input
+# flags that keep another name working: the docs say --input
 FLAG_ALIASES = {"bridge_input": ("--input",)}
 
 

@@ -7,7 +7,13 @@ import sys
 
 from phytrace_edge.cli.common import checked, error
 from phytrace_edge.config.parsers import byte_size
-from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY, QueueError
+from phytrace_edge.errors import (
+    EXIT_NOT_RUNNING,
+    EXIT_OK,
+    EXIT_UNHEALTHY,
+    ConfigError,
+    QueueError,
+)
 from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
 
@@ -45,9 +51,9 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
         )
         return EXIT_NOT_RUNNING
     if out.exists() or out.with_name(out.name + ".part").exists():
-        raise QueueError(f"{out} (or {out.name}.part) exists already: give a new file name")
+        raise ConfigError(f"--out {out} (or {out.name}.part) exists already: give a new file name")
     if not out.parent.is_dir():
-        raise QueueError(f"{out.parent}: no such directory")
+        raise ConfigError(f"--out {out}: no such directory {out.parent}")
     with wiring.open_queue(settings) as store:
         total = store.counter("depth")
         with tqdm(total=total, unit="ev", desc="exporting", file=sys.stderr, disable=None) as bar:

@@ -12,4 +12,4 @@ COMPRESSIONS = ("zstd", "gzip", "none")
 SYNC_MODES = ("full", "normal")
 DEFAULT_ON_FULL = "thin"
 DEFAULT_COMPRESSION = "zstd"
-DEFAULT_SYNC = "full"  # cheap with group commit (MEASUREMENTS.md)
+DEFAULT_SYNC = "full"  # cheap with group commit (docs/benchmarks.md, "Queue")

@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from phytrace_edge import __version__
+from phytrace_edge._version import __version__
 from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.ship.stats import SendStats
 

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from phytrace_edge import __version__
+from phytrace_edge._version import __version__
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.errors import QueueError

@@ -27,7 +27,7 @@ from typing import Any, BinaryIO
 import orjson
 import zstandard
 
-from phytrace_edge import __version__
+from phytrace_edge._version import __version__
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import zstandard
 
-from phytrace_edge import __version__
+from phytrace_edge._version import __version__
 from phytrace_edge.queue.records import Batch, QueuedEvent
 
 # Measured on backlog batches (tools/bench_outage.py): zstd 1 is both faster and

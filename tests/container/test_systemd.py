@@ -21,7 +21,7 @@ from tests.processes import ROOT, wait_for
 
 pytestmark = pytest.mark.timeout(900)
 DOCS = ROOT / "docs" / "operations.md"
-# how systemd boots as PID 1 in a container on these machines (MEASUREMENTS.md)
+# how systemd boots as PID 1 in a container on these machines (measured here)
 BOOT_FLAGS = (
     "--cap-add", "ALL", "--cap-drop", "SYS_RESOURCE", "--cap-drop", "SYS_MODULE",
     "--security-opt", "seccomp=unconfined", "--security-opt", "apparmor=unconfined",

@@ -142,3 +142,19 @@ def test_a_damaged_file_is_imported_up_to_its_first_bad_line(tmp_path, stub) -> 
     # the whole file, from the robot's stick, completes it
     assert run_cli("import", str(stick), **laptop(tmp_path, stub)).returncode == 0
     assert sorted(stub.event_ids()) == sorted(ids)
+
+
+def test_an_out_file_that_exists_or_has_no_folder_is_a_bad_argument(tmp_path: Path) -> None:
+    """exit 2 and one line, as for any bad argument; the queue keeps every event."""
+    queue = tmp_path / "robot" / "queue.db"
+    queue.parent.mkdir()
+    fill_robot_queue(queue, 3)
+    taken = tmp_path / "stick.mcap"
+    taken.write_bytes(b"someone else's file")
+    for out, says in ((taken, "exists already"), (tmp_path / "no" / "f", "no such directory")):
+        result = run_cli("export", "--out", str(out), **robot(queue))
+        assert result.returncode == 2, result.stderr
+        assert says in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert taken.read_bytes() == b"someone else's file"
+    with QueueStore.open(queue) as store:
+        assert store.counter("depth") == 3

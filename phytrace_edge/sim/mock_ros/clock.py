@@ -85,15 +85,12 @@ class Time:
 
 
 class Clock:
-    """``rclpy.clock.Clock``; ROS time is system time here (no /clock simulation)."""
+    """``rclpy.clock.Clock``; ROS time is system time here (no /clock simulation). The
+    time source is the context's (``Node.get_clock()``, ``as_rclpy``'s ``Clock``)."""
 
-    def __init__(
-        self, *, clock_type: ClockType = ClockType.SYSTEM_TIME, source: TimeSource | None = None
-    ):
-        from phytrace_edge.sim.mock_ros import runtime
-
+    def __init__(self, *, clock_type: ClockType = ClockType.SYSTEM_TIME, source: TimeSource):
         self.clock_type = clock_type
-        self._source = source or runtime.default_context().time_source
+        self._source = source
 
     def now(self) -> Time:
         if self.clock_type == ClockType.STEADY_TIME:
