@@ -24,16 +24,16 @@ if TYPE_CHECKING:
 class Thresholds:
     """HEALTH_STALE_S, HEALTH_NO_PROGRESS_S, QUEUE_WARN_FRACTION and QUEUE_MAX_BYTES."""
 
-    __slots__ = ("no_progress_s", "queue_max_bytes", "queue_warn_fraction", "stale_after_s")
+    __slots__ = ("health_stale_s", "no_progress_s", "queue_max_bytes", "queue_warn_fraction")
 
     def __init__(
         self,
-        stale_after_s: float,
+        health_stale_s: float,
         no_progress_s: float,
         queue_warn_fraction: float,
         queue_max_bytes: int,
     ) -> None:
-        self.stale_after_s, self.no_progress_s = stale_after_s, no_progress_s
+        self.health_stale_s, self.no_progress_s = health_stale_s, no_progress_s
         self.queue_warn_fraction, self.queue_max_bytes = queue_warn_fraction, queue_max_bytes
 
 
@@ -51,14 +51,14 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
     oldest_age = None if stats.oldest_queued_at is None else round(now - stats.oldest_queued_at, 1)
     last_success = sender.get("last_success_at")
     claims_to_run = state is not None and state.running
-    running = claims_to_run and heartbeat_age is not None and heartbeat_age <= limits.stale_after_s
+    running = claims_to_run and heartbeat_age is not None and heartbeat_age <= limits.health_stale_s
     stages = service.get("stages", {})
 
     problems = []
     if claims_to_run and not running:
         problems.append(f"heartbeat is {heartbeat_age:.0f} s old: the service hung or died")
     if running:
-        problems += _stage_problems(stages, limits.stale_after_s)
+        problems += _stage_problems(stages, limits.health_stale_s)
     if sender.get("last_status") in (401, 403) and (sender.get("last_error_at") or 0) > (
         last_success or 0
     ):
@@ -69,7 +69,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
     if (
         running
         and queue_error_at > (last_success or 0)
-        and now - queue_error_at < limits.stale_after_s
+        and now - queue_error_at < limits.health_stale_s
     ):
         problems.append(f"the sender cannot use the queue: {sender.get('last_queue_error')}")
     fill = stats.file_bytes / limits.queue_max_bytes if limits.queue_max_bytes else 0.0
@@ -173,14 +173,20 @@ def _drops(queue_drops: dict[str, int], service: dict[str, Any]) -> dict[str, in
     return drops
 
 
-def _stage_problems(stages: dict[str, Any], stale_after_s: float) -> list[str]:
+def stalled(progress_age_s: float | None, stall_after_s: float) -> bool:
+    """The one rule for a stage that makes no progress: past the service's bound
+    (``stall_after_s``, written with each stage), the watchdog is no longer fed and
+    ``status`` reports the stage, both at that same bound."""
+    return progress_age_s is not None and progress_age_s > stall_after_s
+
+
+def _stage_problems(stages: dict[str, Any], health_stale_s: float) -> list[str]:
     problems = []
     for name, stage in stages.items():
         age = stage.get("progress_age_s")
-        bound = max(stale_after_s, stage.get("stall_after_s", 0.0))
         if stage.get("failed"):
             problems.append(f"stage {name} could not be kept alive: {stage['failed']}")
-        elif age is not None and age > bound:
+        elif stalled(age, stage.get("stall_after_s", health_stale_s)):
             problems.append(f"stage {name} has made no progress for {age:.0f} s")
     return problems
 

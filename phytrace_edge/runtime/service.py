@@ -25,7 +25,7 @@ from phytrace_edge.errors import QueueError
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Feed, Finished, Source
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime.health import Thresholds, report
+from phytrace_edge.runtime.health import Thresholds, report, stalled
 from phytrace_edge.runtime.health_events import HealthSchedule, health_event
 from phytrace_edge.runtime.heartbeat import (
     HEARTBEAT_S,
@@ -207,7 +207,7 @@ class BridgeService:
         if self.supervisor.failed.is_set():
             return False
         ages = self.supervisor.progress_ages().values()
-        return all(age <= self.options.stall_after_s for age in ages)
+        return not any(stalled(age, self.options.stall_after_s) for age in ages)
 
     def finished_input(self) -> Finished | None:
         """What a finite input did, once it ended or was stopped (a bag replay's

@@ -34,7 +34,6 @@ if TYPE_CHECKING:
     from phytrace_edge.ship.options import SendPolicy
     from phytrace_edge.ship.transport import HttpTransport, Transport
 
-MIN_LEASE_S = 60.0
 MIN_STALL_S = 30.0
 
 
@@ -119,10 +118,10 @@ def queue_path(s: Settings) -> str:
 
 
 def open_queue(s: Settings) -> QueueStore:
-    """The queue named by the settings. The lease outlives the longest retry wait, so a
-    batch that is still being retried is not taken by a second sender."""
+    """The queue named by the settings, its claims leased as the send policy needs."""
     from phytrace_edge.queue.options import QueueLimits
     from phytrace_edge.queue.store import QueueStore
+    from phytrace_edge.ship.options import claim_lease_s
 
     return QueueStore.open(
         queue_path(s),
@@ -134,7 +133,7 @@ def open_queue(s: Settings) -> QueueStore:
         ),
         compression=s.queue_compression,
         sync=s.queue_sync,
-        lease_s=max(MIN_LEASE_S, 2 * (s.retry_max_s + s.http_timeout_s)),
+        lease_s=claim_lease_s(send_policy(s), s.http_timeout_s),
     )
 
 

@@ -35,3 +35,13 @@ class SendPolicy:
     retry_max_s: float = DEFAULT_RETRY_MAX_S
     http_compression: str = DEFAULT_HTTP_COMPRESSION
     upload_max_bps: int | None = None
+
+
+MIN_LEASE_S = 60.0
+
+
+def claim_lease_s(policy: SendPolicy, http_timeout_s: float) -> float:
+    """How long a claimed batch stays a sender's: longer than the longest retry wait
+    plus a request, twice over, so a batch still being retried is never taken by a
+    second sender (an operator's ``drain`` beside the service)."""
+    return max(MIN_LEASE_S, 2 * (policy.retry_max_s + http_timeout_s))

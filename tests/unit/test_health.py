@@ -9,7 +9,7 @@ from phytrace_edge.units import GIB
 
 NOW = 1_800_000_000.0
 LIMITS = Thresholds(
-    stale_after_s=15, no_progress_s=300, queue_warn_fraction=0.8, queue_max_bytes=GIB
+    health_stale_s=15, no_progress_s=300, queue_warn_fraction=0.8, queue_max_bytes=GIB
 )
 
 
@@ -86,3 +86,17 @@ def test_status_names_what_is_wrong_with_a_silent_topic() -> None:
     assert lines["/gps/fix"].endswith("0 received, no publisher")
     assert "type acme_msgs/msg/Drive not installed here" in lines["/acme/drive"]
     assert lines["/rosout"].endswith("12 log records, 28 held back")
+
+
+def test_status_and_the_watchdog_judge_a_stage_by_the_same_bound() -> None:
+    """With HEALTH_STALE_S raised above the service's stall bound, a stage 45 s without
+    progress (bound 30 s) is a problem in status, as it is for the watchdog, which the
+    service stops feeding at that bound (both use ``stalled``)."""
+    from phytrace_edge.runtime.health import stalled
+
+    patient = Thresholds(
+        health_stale_s=60, no_progress_s=300, queue_warn_fraction=0.8, queue_max_bytes=GIB
+    )
+    doc = report(stats(stages={"sender": stage(45.0)}), patient, NOW)
+    assert doc["problems"] == ["stage sender has made no progress for 45 s"]
+    assert stalled(45.0, 30.0) and not stalled(30.0, 30.0) and not stalled(None, 30.0)
