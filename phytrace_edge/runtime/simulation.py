@@ -70,7 +70,7 @@ def run_simulation(
     source = SimSource(options)
     builder_options = wiring.builder_options(settings)
     builder = UDMBuilder(builder_options, source.clock, source.field_types)
-    sampler = Sampler(builder, emit, builder_options.sample_rate_hz)
+    sampler = Sampler(builder, emit, builder_options.sample_rate_hz, before_tick=source.before_tick)
     started = time.monotonic()
     stop = threading.Event()
     ticker = threading.Thread(target=sampler.run, args=(stop,), name="sampler", daemon=True)

@@ -305,3 +305,22 @@ def test_an_incompatible_state_stream_is_counted_from_the_graph(graph) -> None:
     g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
     g.run(GRAPH_CHECK_S + 0.1)
     assert g.subscriber.stats()["/scan"]["qos_incompatible"] == 1
+
+
+def test_a_state_stream_re_matched_at_the_graph_check_keeps_its_waiting_message(graph) -> None:
+    """The graph check replaces the battery's subscription (best effort before the
+    reliable publisher was seen) at the same moment as a tick: the message published
+    since the last tick, still waiting in the old subscription, is handed over, not
+    destroyed with it."""
+    g = graph(SAMPLE_RATE_HZ="5")
+    first, choice, _ = g.subscription("/battery_state")
+    assert not choice.reliable
+    battery = g.robot.create_publisher(m.BatteryState, "/battery_state", RELIABLE)
+    g.run(1.0)
+    battery.publish(m.BatteryState(voltage=20.0, percentage=0.5))
+    g.run(0.95)  # past the tick at 1.8 s, before the check and the tick at 2.0 s
+    battery.publish(m.BatteryState(voltage=21.0, percentage=0.5))
+    g.run(0.1)
+    replaced, choice, _ = g.subscription("/battery_state")
+    assert replaced is not first and choice.reliable
+    assert g.events[-1]["power"]["battery"]["voltage_v"] == 21.0

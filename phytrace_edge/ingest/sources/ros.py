@@ -94,21 +94,29 @@ def import_error_message(exc: ImportError) -> str:
 
 
 class RosSource:
-    """Subscriptions to the robot's topics on an rclpy node, spun on the ingest thread."""
+    """Subscriptions to the robot's topics on an rclpy node, spun on the ingest thread.
+
+    ``import_module`` finds rclpy: the real one, or the mock's modules, over which the
+    simulator (``sources/sim.py``) runs this same input."""
 
     keeps_time = False
     clock = None
 
-    def __init__(self, options: SourceOptions) -> None:
+    def __init__(
+        self,
+        options: SourceOptions,
+        import_module: Callable[[str], ModuleType] = importlib.import_module,
+    ) -> None:
         self._options = options
+        self._import = import_module
         try:
-            self._api = load_rclpy()
-            self._rclpy = importlib.import_module("rclpy")
-            self._executors = importlib.import_module("rclpy.executors")
+            self.api = load_rclpy(import_module)
+            self._rclpy = import_module("rclpy")
+            self._executors = import_module("rclpy.executors")
         except ImportError as exc:
             raise ConfigError(import_error_message(exc)) from None
-        self._node: Any = None
-        self._executor: Any = None
+        self.node: Any = None
+        self.executor: Any = None
         self._subscriber: TopicSubscriber | None = None
 
     def start(self, feed: Feed) -> None:
@@ -116,29 +124,29 @@ class RosSource:
         # the bridge owns SIGINT and SIGTERM: it stops ingest, then the queue, then
         # ship, in order; rclpy's own handlers would shut the context down under the
         # executor (ExternalShutdownException on every stop)
-        signals = importlib.import_module("rclpy.signals")
+        signals = self._import("rclpy.signals")
         self._rclpy.init(
             args=["phytrace-edge", *(("--ros-args", *ros_args) if ros_args else ())],
             signal_handler_options=signals.SignalHandlerOptions.NO,
         )
-        self._node = self._api.create_node(NODE_NAME)
-        declare_settings(self._api, self._node, dict(self._options.parameters))
+        self.node = self.api.create_node(NODE_NAME)
+        declare_settings(self.api, self.node, dict(self._options.parameters))
         # state streams (odometry, IMU, scan, ...) are taken at the sample tick: no
         # Python callback for each of their messages
         self._subscriber = subscribe_topics(
-            self._api,
-            self._node,
+            self.api,
+            self.node,
             wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
             feed.on_message,
             dict(self._options.qos_overrides),
             take_at_tick=True,
         )
-        self._executor = self._executors.SingleThreadedExecutor()
-        self._executor.add_node(self._node)
+        self.executor = self._executors.SingleThreadedExecutor()
+        self.executor.add_node(self.node)
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
         while not stop.is_set():
-            self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            self.executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
             beat()
 
     def field_types(self, msg: Any) -> Mapping[str, str]:
@@ -149,8 +157,8 @@ class RosSource:
             self._subscriber.take_latest()
 
     def stop(self) -> None:
-        if self._node is not None:
-            self._node.destroy_node()
+        if self.node is not None:
+            self.node.destroy_node()
         self._rclpy.try_shutdown()
 
     def finished(self) -> Finished | None:

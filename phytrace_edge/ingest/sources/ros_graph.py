@@ -162,9 +162,13 @@ class TopicSubscriber:
 
     def refresh(self) -> None:
         with self._lock:  # the sampler's take_latest uses the same subscriptions
-            self._refresh()
+            kept = self._refresh()
+        for canonical, msg in kept:
+            self._on_message(canonical, msg)
 
-    def _refresh(self) -> None:
+    def _refresh(self) -> list[tuple[str, Any]]:
+        """Subscribe and re-match; the messages taken from subscriptions it replaced."""
+        kept: list[tuple[str, Any]] = []
         for canonical, wanted in self._topics.items():
             publishers = [
                 info
@@ -208,6 +212,9 @@ class TopicSubscriber:
                 )
                 continue
             if current is not None:
+                if self._is_taken(wanted):  # its newest message was not taken yet
+                    waiting = self._api.take(current[0])
+                    kept += [(canonical, waiting)] if waiting is not None else []
                 self._node.destroy_subscription(current[0])
             self.subscribed[canonical] = (
                 self._subscribe(canonical, wanted, message_class, choice),
@@ -221,6 +228,7 @@ class TopicSubscriber:
                 type_name,
                 choice.describe(),
             )
+        return kept
 
     def stats(self) -> dict[str, dict[str, Any]]:
         """Per configured topic: publishers seen, the QoS subscribed with, and how many

@@ -89,10 +89,12 @@ class SingleThreadedExecutor:
                 if service.pending and self._runs(service):
                     request, future = service.pending.popleft()
                     return functools.partial(_answer, service.handler, request, future)
-        for node in self.nodes:
-            for timer in node.timers:
-                if timer.is_ready() and self._runs(timer):
-                    return timer.fire
+        # timers due at the same moment fire in the order they were made, whatever
+        # node they belong to (rclpy's order is unspecified; a fixed one keeps a
+        # simulation repeatable)
+        due = [t for n in self.nodes for t in n.timers if t.is_ready() and self._runs(t)]
+        if due:
+            return min(due, key=lambda t: (t.next_call_ns, t.sequence)).fire
         return None
 
     def _next_timer_ns(self) -> int | None:

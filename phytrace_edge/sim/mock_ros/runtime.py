@@ -21,6 +21,7 @@ Semantics kept from ROS 2 on DDS, because the bridge's behaviour depends on them
 from __future__ import annotations
 
 import copy
+import itertools
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -135,6 +136,9 @@ def try_shutdown(*, context: Context | None = None) -> None:
         shutdown(context=context)
 
 
+_TIMERS_MADE = itertools.count()
+
+
 class Timer:
     def __init__(
         self,
@@ -146,6 +150,7 @@ class Timer:
     ):
         self.period_ns, self.callback, self.clock = period_ns, callback, clock
         self.callback_group = callback_group
+        self.sequence = next(_TIMERS_MADE)
         self._source = source
         self.next_call_ns = source.steady_ns() + period_ns
         self.cancelled = False
