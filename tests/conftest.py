@@ -75,3 +75,20 @@ def stub_factory(tmp_path):
 @pytest.fixture
 def stub(stub_factory):
     return stub_factory()
+
+
+@pytest.fixture
+def bridge_in_process(tmp_path, stub_factory):
+    """``start(endpoint, **env)``: a bridge service in this process (tests/bridge.py),
+    started; every one stopped at teardown, before the stubs."""
+    from tests.bridge import InProcessBridge, bridge_settings
+
+    started: list[InProcessBridge] = []
+
+    def start(endpoint: str, **env: str) -> InProcessBridge:
+        started.append(InProcessBridge(bridge_settings(tmp_path, endpoint, **env)))
+        return started[-1]
+
+    yield start
+    for bridge in started:
+        bridge.stop()

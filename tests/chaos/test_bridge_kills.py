@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.chaos.test_stub_outages import bridge_settings, drain_rest
+from tests.bridge import bridge_settings
+from tests.chaos.test_stub_outages import drain_rest
 from tests.processes import BridgeProcess, wait_for
 
 KILLS = 5

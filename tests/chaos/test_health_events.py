@@ -4,10 +4,6 @@ stub is back, that event arrives, followed by the recovery."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from phytrace_edge.runtime.wiring import build_service
-from tests.chaos.test_stub_outages import bridge_settings
 from tests.processes import wait_for
 
 
@@ -15,17 +11,11 @@ def health_events(events: list[dict]) -> list[dict]:
     return [e for e in events if e["event_type"] == "bridge.health"]
 
 
-def test_an_outage_reaches_phycloud_as_health_events_after_it(tmp_path: Path, stub) -> None:
-    settings = bridge_settings(
-        tmp_path,
-        stub.endpoint,
-        SAMPLE_RATE_HZ="5",
-        HEALTH_EVENT_INTERVAL_S="30",
-        HEALTH_NO_PROGRESS_S="1",
+def test_an_outage_reaches_phycloud_as_health_events_after_it(stub, bridge_in_process) -> None:
+    bridge = bridge_in_process(
+        stub.endpoint, SAMPLE_RATE_HZ="5", HEALTH_EVENT_INTERVAL_S="30", HEALTH_NO_PROGRESS_S="1"
     )
-    built: list[dict] = []
-    service = build_service(settings, {}, on_event=built.append)
-    service.start()
+    built = bridge.built
     try:
         wait_for(lambda: health_events(stub.events()), 30, "the start health event at PhyCloud")
         stub.kill()
@@ -41,7 +31,7 @@ def test_an_outage_reaches_phycloud_as_health_events_after_it(tmp_path: Path, st
             "the outage's health event and the recovery's at PhyCloud",
         )
     finally:
-        service.shutdown(settings.shutdown_grace_s)
+        bridge.stop()
 
     received = health_events(stub.events())
     start, down, up, stop = received[0], received[-3], received[-2], received[-1]

@@ -4,26 +4,17 @@ real stub, the simulated robot)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime import wiring
-from phytrace_edge.runtime.health import report
-from tests.chaos.test_stub_outages import bridge_settings
 from tests.processes import wait_for
 
 
-def test_status_counts_extra_topics_and_logs(tmp_path: Path, stub) -> None:
-    settings = bridge_settings(
-        tmp_path,
+def test_status_counts_extra_topics_and_logs(stub, bridge_in_process) -> None:
+    bridge = bridge_in_process(
         stub.endpoint,
         SAMPLE_RATE_HZ="5",
         TOPICS_EXTRA="/motor/temperature rate_hz=0.5; /not/published",
         ROSOUT_MIN_LEVEL="info",
         ROSOUT_BURST="2",
     )
-    service = wiring.build_service(settings, {})
-    service.start()
     try:
         wait_for(
             lambda: (
@@ -33,14 +24,9 @@ def test_status_counts_extra_topics_and_logs(tmp_path: Path, stub) -> None:
             60,
             "extra-topic and log events at PhyCloud",
         )
-        service.heartbeat(running=True)
-        document = report(
-            read_stats(wiring.queue_path(settings), service.store.now()),
-            wiring.health_thresholds(settings),
-            service.store.now(),
-        )
+        document = bridge.status()
     finally:
-        service.shutdown(settings.shutdown_grace_s)
+        bridge.stop()
     topics = document["topics"]
     temperature = topics["/motor/temperature"]
     assert temperature["received"] > 0 and temperature["events"] > 0
