@@ -39,6 +39,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     import tempfile
     from pathlib import Path
 
+    from phytrace_edge.queue.defaults import OnFull
     from phytrace_edge.queue.options import QueueLimits
     from phytrace_edge.queue.store import QueueStore
     from phytrace_edge.ship.sender import Sender
@@ -48,7 +49,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     # strictly oldest first: the staging queue only feeds the sender
     policy = dataclasses.replace(wiring.send_policy(settings), live_share=0.0)
     # a chunk at a time: never full, and events days old must not expire while staged
-    limits = QueueLimits(on_full="drop_newest", ttl_s=10 * 365 * 86400.0)
+    limits = QueueLimits(on_full=OnFull.DROP_NEWEST, ttl_s=10 * 365 * 86400.0)
     state_dir = Path(wiring.queue_path(settings)).parent
     state_dir.mkdir(parents=True, exist_ok=True)
     complete = True

@@ -18,6 +18,7 @@ from typing import TypeVar
 from phytrace_edge.queue import leases
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import bump_counters
+from phytrace_edge.queue.defaults import OnFull
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.rows import delete_range, depth_and_used_bytes
 from phytrace_edge.queue.thinning import thin_oldest
@@ -112,7 +113,7 @@ class Caps:
 
         if limits.max_events is not None and depth + len(rows) > limits.max_events:
             excess = depth + len(rows) - limits.max_events
-            if limits.on_full != "drop_newest":
+            if limits.makes_room:
                 excess -= self._free(cursor, excess, "cap_events", now)
             if excess > 0:
                 bump_counters(cursor, **{"drop:cap_events": min(excess, len(rows))})
@@ -123,7 +124,7 @@ class Caps:
             return used + per_event * len(rows) - self.data_cap
 
         excess_bytes = over()
-        if limits.on_full != "drop_newest":
+        if limits.makes_room:
             for _ in range(MAX_DROP_ROUNDS):  # deleted rows free whole pages only
                 if excess_bytes <= 0 or not self._free(
                     cursor, math.ceil(excess_bytes / per_event) + 1, "cap_bytes", now
@@ -138,7 +139,7 @@ class Caps:
 
     def _free(self, cursor: sqlite3.Cursor, count: int, reason: str, now: float) -> int:
         """Make room for about ``count`` events: thin, or drop the oldest."""
-        if self.limits.on_full != "thin":
+        if self.limits.on_full is not OnFull.THIN:
             return drop_oldest(cursor, count, reason, now)
         thinned = thin_oldest(cursor, self.codecs, count, now, max(2, self.frame_events))
         return thinned or drop_oldest(cursor, count, reason, now, periodic_first=True)

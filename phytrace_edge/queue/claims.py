@@ -184,9 +184,3 @@ def _ids_deleted_by(cursor: sqlite3.Cursor, batch: Batch, codecs: Codecs) -> set
         ).fetchall()
         ids.update(event.event_id for event in decode_rows(codecs, rows))
     return ids
-
-
-def take_back(cursor: sqlite3.Cursor, dead_owners: list[str]) -> None:
-    """Free the leases of owners that died (``ownership.is_alive`` said so)."""
-    for token in dead_owners:
-        leases.take_back(cursor, token)

@@ -42,10 +42,13 @@ def extend(cursor: sqlite3.Cursor, owner: str, now: float, until: float) -> bool
     return cursor.rowcount > 0
 
 
-def take_back(cursor: sqlite3.Cursor, owner_token: str) -> int:
-    """Remove every lease of a dead owner; its events are claimable again at once."""
-    cursor.execute(
-        "DELETE FROM leases WHERE substr(owner, 1, ?) = ?",
-        (len(owner_token) + 1, owner_token + ":"),
-    )
-    return cursor.rowcount
+def take_back(cursor: sqlite3.Cursor, dead_owners: list[str]) -> int:
+    """Remove every lease of owners that died (``ownership`` said so; a claim's owner is
+    ``<owner token>:<claim>``): their events are claimable again at once. The count."""
+    taken = 0
+    for token in dead_owners:
+        cursor.execute(
+            "DELETE FROM leases WHERE substr(owner, 1, ?) = ?", (len(token) + 1, token + ":")
+        )
+        taken += cursor.rowcount
+    return taken

@@ -191,7 +191,7 @@ class QueueStore:
         try:
             return self._insert(rows)
         except QueueFullError:
-            if self.limits.on_full != "drop_newest" and self._evict_oldest(
+            if self.limits.makes_room and self._evict_oldest(
                 max(len(rows), self._db.counter("depth") // 100), "disk_full"
             ):
                 with contextlib.suppress(QueueFullError):
@@ -316,7 +316,7 @@ class QueueStore:
         owners = self._db.read("SELECT DISTINCT owner FROM leases WHERE expires_at > ?", (now,))
         dead = dead_owners(self.path, {owner for (owner,) in owners}, self._owner.token)
         if dead:  # a write only when there is something to take back
-            self._db.write(lambda cursor: claims.take_back(cursor, dead))
+            self._db.write(lambda cursor: leases.take_back(cursor, dead))
             log.warning(
                 "queue %s: took back the claims of %d process(es) that died while sending",
                 self.path,

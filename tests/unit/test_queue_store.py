@@ -489,3 +489,13 @@ def test_stats_are_readable_from_another_connection_during_a_write(open_store) -
         depth = reader.execute("SELECT value FROM counters WHERE name = 'depth'").fetchone()[0]
     assert depth == 10
     reader.close()
+
+
+def test_the_on_full_policy_is_read_once_into_its_type() -> None:
+    from phytrace_edge.queue.defaults import OnFull
+
+    assert QueueLimits(on_full="drop_newest").on_full is OnFull.DROP_NEWEST
+    assert not QueueLimits(on_full="drop_newest").makes_room
+    assert QueueLimits().makes_room and QueueLimits().on_full is OnFull.THIN
+    with pytest.raises(ValueError, match="bogus"):
+        QueueLimits(on_full="bogus")
