@@ -1,7 +1,7 @@
 """Claims, the SQL of the sending side: lease events for one of the two lanes (the
 backfill, oldest first; the live lane, newest first), delete what PhyCloud accepted
 (moving its rejects to dead letters), and take back the claims of processes that
-died. Each runs in the caller's transaction."""
+died (``leases.take_back``). Each runs in the caller's transaction."""
 
 from __future__ import annotations
 
@@ -14,11 +14,22 @@ from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import bump_counters
 from phytrace_edge.queue.frames import decode_rows
 from phytrace_edge.queue.records import Batch, DeadLetterRow
-from phytrace_edge.queue.rows import delete_range
+from phytrace_edge.queue.rows import (
+    SIZE_COLUMNS,
+    STORED_COLUMNS,
+    RowSize,
+    StoredRow,
+    delete_range,
+)
 
 BAND_S = 3600.0  # the backfill's age band: its important events go before its periodic ones
 
 Range = tuple[int, int]
+Leased = tuple[list[Range], list[StoredRow]]  # the ranges leased and their rows
+
+
+def _sizes(cursor: sqlite3.Cursor, sql: str, params: tuple[Any, ...]) -> list[RowSize]:
+    return [RowSize._make(row) for row in cursor.execute(sql, params)]
 
 
 def lease_oldest(
@@ -28,30 +39,29 @@ def lease_oldest(
     now: float,
     until: float,
     important_first: bool = True,
-) -> tuple[list[Range], list[Any]]:
+) -> Leased:
     """The backfill lane: lease the oldest free events, whole rows of at most
     ``limits`` = (events, bytes of JSON) (always one row), to ``token`` until
-    ``until``; (the ranges leased, their rows (id, last_id, count, queued_at,
-    event_id, codec, dict_id, body) oldest first). With ``important_first``, the
+    ``until``; the ranges leased and their rows, oldest first. With ``important_first``, the
     important events of the oldest hour still queued go first, a lease each."""
     free = leases.free_ranges(cursor, now)
-    sizes: list[Any] = []
+    sizes: list[RowSize] = []
     for low, high in free:
-        sizes = cursor.execute(
-            "SELECT id, last_id, count, json_size, queued_at FROM events "
-            "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
+        sizes = _sizes(
+            cursor,
+            f"SELECT {SIZE_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
             (low, high, limits[0]),
-        ).fetchall()
+        )
         if sizes:
             break
     if not sizes:
         return [], []
     if important_first:
-        ahead = _important_in_band(cursor, now, sizes[0][4] + BAND_S, limits)
+        ahead = _important_in_band(cursor, now, sizes[0].queued_at + BAND_S, limits)
         if ahead:
-            return _lease(cursor, [(row[0], row[1]) for row in ahead], token, until)
+            return _lease(cursor, [(row.id, row.last_id) for row in ahead], token, until)
     kept = _within(sizes, limits)
-    return _lease(cursor, [(sizes[0][0], sizes[kept - 1][1])], token, until)
+    return _lease(cursor, [(sizes[0].id, sizes[kept - 1].last_id)], token, until)
 
 
 def lease_newest(
@@ -61,40 +71,39 @@ def lease_newest(
     now: float,
     until: float,
     since: float,
-) -> tuple[list[Range], list[Any]]:
+) -> Leased:
     """The live lane: lease the newest free events queued at or after ``since``, whole
     rows of at most ``limits`` (always one row); as ``lease_oldest``. The rows are
     one run below the newest, so the lane sends newest first, batch by batch."""
     for low, high in reversed(leases.free_ranges(cursor, now)):
-        newest = cursor.execute(
-            "SELECT id, last_id, count, json_size, queued_at FROM events "
-            "WHERE id BETWEEN ? AND ? ORDER BY id DESC LIMIT ?",
+        newest = _sizes(
+            cursor,
+            f"SELECT {SIZE_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id DESC LIMIT ?",
             (low, high, limits[0]),
-        ).fetchall()
+        )
         fresh = _takewhile_since(newest, since)
         if fresh:
             kept = _within(fresh, limits)
-            return _lease(cursor, [(fresh[kept - 1][0], fresh[0][1])], token, until)
+            return _lease(cursor, [(fresh[kept - 1].id, fresh[0].last_id)], token, until)
         if newest:
             break  # this range's newest is older than ``since``: so is all below it
     return [], []
 
 
-def _takewhile_since(rows: list[Any], since: float) -> list[Any]:
+def _takewhile_since(rows: list[RowSize], since: float) -> list[RowSize]:
     taken = []
     for row in rows:
-        if row[4] < since:
+        if row.queued_at < since:
             break
         taken.append(row)
     return taken
 
 
-def _within(sizes: list[Any], limits: tuple[int, int]) -> int:
-    """How many of these rows (id, last_id, count, json_size, ...) fit in ``limits``;
-    at least one."""
+def _within(sizes: list[RowSize], limits: tuple[int, int]) -> int:
+    """How many of these rows fit in ``limits`` (events, bytes of JSON); at least one."""
     events, total, kept = 0, 0, 0
     for row in sizes:
-        count, json_size = row[2], row[3]
+        count, json_size = row.events, row.json_size
         if kept and (events + count > limits[0] or total + json_size > limits[1]):
             break
         events, total, kept = events + count, total + json_size, kept + 1
@@ -103,29 +112,30 @@ def _within(sizes: list[Any], limits: tuple[int, int]) -> int:
 
 def _important_in_band(
     cursor: sqlite3.Cursor, now: float, before: float, limits: tuple[int, int]
-) -> list[Any]:
+) -> list[RowSize]:
     """Unleased important rows queued before ``before``, oldest first, within
     ``limits`` (found by the partial index on important rows, not a scan)."""
-    rows = cursor.execute(
-        "SELECT id, last_id, count, json_size, queued_at FROM events AS e "
+    rows = _sizes(
+        cursor,
+        f"SELECT {SIZE_COLUMNS} FROM events AS e "
         "WHERE important = 1 AND queued_at < ? AND NOT EXISTS (SELECT 1 FROM leases "
         "WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) ORDER BY id LIMIT ?",
         (before, now, limits[0]),
-    ).fetchall()
+    )
     return rows[: _within(rows, limits)] if rows else []
 
 
-def _lease(
-    cursor: sqlite3.Cursor, ranges: list[Range], token: str, until: float
-) -> tuple[list[Range], list[Any]]:
-    rows: list[Any] = []
+def _lease(cursor: sqlite3.Cursor, ranges: list[Range], token: str, until: float) -> Leased:
+    rows: list[StoredRow] = []
     for first_id, last_id in ranges:
         leases.take(cursor, first_id, last_id, token, until)
-        rows += cursor.execute(
-            "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body FROM events "
-            "WHERE id BETWEEN ? AND ? ORDER BY id",
-            (first_id, last_id),
-        ).fetchall()
+        rows += map(
+            StoredRow._make,
+            cursor.execute(
+                f"SELECT {STORED_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id",
+                (first_id, last_id),
+            ),
+        )
     return ranges, rows
 
 
@@ -178,9 +188,9 @@ def _ids_deleted_by(cursor: sqlite3.Cursor, batch: Batch, codecs: Codecs) -> set
     ids: set[str] = set()
     for first, last in batch.ranges:
         rows = cursor.execute(
-            "SELECT id, last_id, count, queued_at, event_id, codec, dict_id, body FROM events "
-            "WHERE id BETWEEN ? AND ? AND last_id <= ?",
+            f"SELECT {STORED_COLUMNS} FROM events WHERE id BETWEEN ? AND ? AND last_id <= ?",
             (first, last, last),
-        ).fetchall()
-        ids.update(event.event_id for event in decode_rows(codecs, rows))
+        )
+        stored = [StoredRow._make(row) for row in rows]
+        ids.update(event.event_id for event in decode_rows(codecs, stored))
     return ids

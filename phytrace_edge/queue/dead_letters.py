@@ -18,7 +18,7 @@ from phytrace_edge.queue.caps import Caps
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.records import DeadLetter, DeadLetterRow, QueuedEvent
-from phytrace_edge.queue.rows import insert_rows
+from phytrace_edge.queue.rows import NewRow, insert_rows
 
 _COLUMNS = "id, event_id, queued_at, dead_at, reason, status_code, response, json_size"
 
@@ -99,7 +99,7 @@ class DeadLetterBox:
             rows = rows[: self._caps.fitting(cursor, [len(row[-1]) for row in rows])]
             insert_rows(
                 cursor,
-                [row[1:] for row in rows],
+                [NewRow._make(row[1:]) for row in rows],
                 requeued_total=len(rows),
                 dead_letters=-len(rows),
             )

@@ -21,13 +21,13 @@ from __future__ import annotations
 import re
 import sqlite3
 from collections.abc import Iterator, Sequence
-from typing import Any
 
 import orjson
 
 from phytrace_edge.queue import leases
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.records import QueuedEvent
+from phytrace_edge.queue.rows import StoredRow
 
 FRAME_EVENTS = 100
 SEAL_AFTER_S = 10.0
@@ -48,10 +48,9 @@ def split_frame(json: bytes, count: int) -> list[bytes]:
     return events
 
 
-def decode_rows(codecs: Codecs, rows: Sequence[Any]) -> list[QueuedEvent]:
-    """The events of claimed rows (id, last_id, count, queued_at, event_id, codec,
-    dict_id, body), each row decompressed once. A frame's events get the ids
-    ``id + i``: within its range, unique in the batch."""
+def decode_rows(codecs: Codecs, rows: Sequence[StoredRow]) -> list[QueuedEvent]:
+    """The events of claimed rows, each row decompressed once. A frame's events get
+    the ids ``id + i``: within its range, unique in the batch."""
     events = []
     for row_id, _, count, queued_at, event_id, codec, dict_id, body in rows:
         jsons = split_frame(codecs.decode(codec, dict_id, body), count)

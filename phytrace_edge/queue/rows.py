@@ -5,16 +5,55 @@ from __future__ import annotations
 
 import sqlite3
 from collections.abc import Sequence
-from typing import Any
+from typing import NamedTuple
 
 from phytrace_edge.queue.database import bump_counters
 
 MAX_ID = 2**63 - 1
 
 
-def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **counters: int) -> None:
-    """Insert (event_id, important, queued_at, codec, dict_id, json_size, body) rows with
-    ids from next_id, keeping depth and stored_bytes exact, and add ``counters``."""
+class NewRow(NamedTuple):
+    """One event on its way into the ``events`` table (its id comes with the insert)."""
+
+    event_id: str
+    important: int  # 1: never thinned, sent first of its age band
+    queued_at: float
+    codec: int
+    dict_id: int | None
+    json_size: int  # of the event's JSON, before compression
+    body: bytes
+
+
+class RowSize(NamedTuple):
+    """What a row weighs, read before a claim reads any body."""
+
+    id: int
+    last_id: int  # > id for a frame of events
+    events: int  # the column ``count``
+    json_size: int
+    queued_at: float
+
+
+class StoredRow(NamedTuple):
+    """A row as a claim reads it: one event, or a frame of ``count`` events."""
+
+    id: int
+    last_id: int
+    events: int  # the column ``count``
+    queued_at: float
+    event_id: str
+    codec: int
+    dict_id: int | None
+    body: bytes
+
+
+STORED_COLUMNS = "id, last_id, count, queued_at, event_id, codec, dict_id, body"
+SIZE_COLUMNS = "id, last_id, count, json_size, queued_at"
+
+
+def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[NewRow], **counters: int) -> None:
+    """Insert rows with ids from next_id, keeping depth and stored_bytes exact, and add
+    ``counters``."""
     next_id = cursor.execute("SELECT value FROM counters WHERE name = 'next_id'").fetchone()[0]
     cursor.executemany(
         "INSERT INTO events(id, last_id, event_id, important, queued_at, codec, dict_id, "
@@ -25,7 +64,7 @@ def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[tuple[Any, ...]], **count
         cursor,
         next_id=len(rows),
         depth=len(rows),
-        stored_bytes=sum(len(r[6]) for r in rows),
+        stored_bytes=sum(len(row.body) for row in rows),
         **counters,
     )
 

@@ -54,7 +54,7 @@ from phytrace_edge.queue.ownership import Owner, dead_owners, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
 from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
 from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
-from phytrace_edge.queue.rows import insert_rows
+from phytrace_edge.queue.rows import NewRow, insert_rows
 from phytrace_edge.queue.service_state import write_service_state
 from phytrace_edge.queue.sqlite_errors import queue_error
 
@@ -214,7 +214,7 @@ class QueueStore:
             insert_rows(
                 cursor,
                 [
-                    (eid, int(important), now, e.codec, e.dict_id, size, e.body)
+                    NewRow(eid, int(important), now, e.codec, e.dict_id, size, e.body)
                     for eid, important, size, e in accepted
                 ],
                 queued_total=len(rows),  # every event put, whatever the caps did with it
