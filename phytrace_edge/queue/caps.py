@@ -177,20 +177,16 @@ def drop_oldest(
     if dropped:
         bump_counters(cursor, **{f"drop:{reason}": dropped})
         return dropped
-    for low, high in leases.free_ranges(cursor, now):
+    for chunk in leases.unleased(cursor, now, "id, last_id, count", count):
         if dropped >= count:
             break
-        rows = cursor.execute(
-            "SELECT last_id, count FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
-            (low, high, count - dropped),
-        ).fetchall()
         last, covered = None, 0
-        for last_id, events in rows:
+        for _, last_id, events in chunk.rows:
             if dropped + covered >= count:
                 break
             last, covered = last_id, covered + events
-        if last is not None:
-            dropped += delete_range(cursor, low, last)
+        if last is not None:  # one delete for the chunk's oldest rows
+            dropped += delete_range(cursor, chunk.low, last)
     bump_counters(cursor, **{f"drop:{reason}": dropped})
     return dropped
 
@@ -198,16 +194,10 @@ def drop_oldest(
 def _drop_oldest_periodic(cursor: sqlite3.Cursor, count: int, now: float) -> int:
     """Delete at least ``count`` of the oldest periodic events not under a lease."""
     dropped = 0
-    for low, high in leases.free_ranges(cursor, now):
-        rows = cursor.execute(
-            "SELECT id, last_id, count FROM events WHERE id BETWEEN ? AND ? AND important = 0 "
-            "ORDER BY id LIMIT ?",
-            (low, high, count - dropped),
-        ).fetchall()
-        for row_id, last_id, _ in rows:
+    periodic = leases.unleased(cursor, now, "id, last_id", count, where="AND important = 0")
+    for chunk in periodic:
+        for row_id, last_id in chunk.rows:
             if dropped >= count:
                 return dropped
             dropped += delete_range(cursor, row_id, last_id)
-        if dropped >= count:
-            break
     return dropped

@@ -44,18 +44,10 @@ def lease_oldest(
     ``limits`` = (events, bytes of JSON) (always one row), to ``token`` until
     ``until``; the ranges leased and their rows, oldest first. With ``important_first``, the
     important events of the oldest hour still queued go first, a lease each."""
-    free = leases.free_ranges(cursor, now)
-    sizes: list[RowSize] = []
-    for low, high in free:
-        sizes = _sizes(
-            cursor,
-            f"SELECT {SIZE_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
-            (low, high, limits[0]),
-        )
-        if sizes:
-            break
-    if not sizes:
+    oldest = next(leases.unleased(cursor, now, SIZE_COLUMNS, limits[0]), None)
+    if oldest is None:
         return [], []
+    sizes = [RowSize._make(row) for row in oldest.rows]
     if important_first:
         ahead = _important_in_band(cursor, now, sizes[0].queued_at + BAND_S, limits)
         if ahead:
@@ -75,19 +67,13 @@ def lease_newest(
     """The live lane: lease the newest free events queued at or after ``since``, whole
     rows of at most ``limits`` (always one row); as ``lease_oldest``. The rows are
     one run below the newest, so the lane sends newest first, batch by batch."""
-    for low, high in reversed(leases.free_ranges(cursor, now)):
-        newest = _sizes(
-            cursor,
-            f"SELECT {SIZE_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id DESC LIMIT ?",
-            (low, high, limits[0]),
-        )
-        fresh = _takewhile_since(newest, since)
-        if fresh:
-            kept = _within(fresh, limits)
-            return _lease(cursor, [(fresh[kept - 1].id, fresh[0].last_id)], token, until)
-        if newest:
-            break  # this range's newest is older than ``since``: so is all below it
-    return [], []
+    newest = next(leases.unleased(cursor, now, SIZE_COLUMNS, limits[0], newest_first=True), None)
+    # the newest rows no lease covers; if they are older than ``since``, so is all below
+    fresh = _takewhile_since([RowSize._make(row) for row in newest.rows], since) if newest else []
+    if not fresh:
+        return [], []
+    kept = _within(fresh, limits)
+    return _lease(cursor, [(fresh[kept - 1].id, fresh[0].last_id)], token, until)
 
 
 def _takewhile_since(rows: list[RowSize], since: float) -> list[RowSize]:

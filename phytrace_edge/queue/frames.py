@@ -88,27 +88,24 @@ class Sealer:
         of one event are no frames: ``frame_events=1`` turns sealing off."""
         if self.frame_events < 2:
             return 0
-        cutoff, made = now - SEAL_AFTER_S, 0
-        for low, high in leases.free_ranges(cursor, now):
-            for run in self._runs(cursor, max(low, self.sealed_below), high, cutoff):
-                if made >= SEAL_MAX_FRAMES:
-                    return made
-                self._pack(cursor, run)
-                made += 1
+        made = 0
+        for run in self._runs(cursor, now, now - SEAL_AFTER_S):
+            if made >= SEAL_MAX_FRAMES:
+                return made
+            self._pack(cursor, run)
+            made += 1
         return made
 
-    def _runs(
-        self, cursor: sqlite3.Cursor, low: int, high: int, cutoff: float
-    ) -> Iterator[list[int]]:
-        """Ids of runs of ``frame_events`` consecutive single rows, all old enough."""
+    def _runs(self, cursor: sqlite3.Cursor, now: float, cutoff: float) -> Iterator[list[int]]:
+        """Ids of runs of ``frame_events`` consecutive single rows no lease covers, all
+        old enough (a run never crosses a lease)."""
         run: list[int] = []
-        while True:
-            rows = cursor.execute(
-                "SELECT id, last_id, count, important, queued_at FROM events "
-                "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
-                (low, high, _SCAN_ROWS),
-            ).fetchall()
-            for row_id, last_id, count, important, queued_at in rows:
+        stretch = None
+        columns = "id, last_id, count, important, queued_at"
+        for chunk in leases.unleased(cursor, now, columns, _SCAN_ROWS, from_id=self.sealed_below):
+            if chunk.high != stretch:  # another stretch between leases: another run
+                stretch, run = chunk.high, []
+            for row_id, last_id, count, important, queued_at in chunk.rows:
                 if queued_at >= cutoff:
                     return  # ids grow with time: the rest is fresh
                 if count > 1 or important:  # a frame, or an event that stays alone
@@ -120,9 +117,6 @@ class Sealer:
                     yield run
                     self.sealed_below = run[-1] + 1
                     run = []
-            if len(rows) < _SCAN_ROWS:
-                return
-            low = rows[-1][0] + 1
 
     def _pack(self, cursor: sqlite3.Cursor, ids: list[int]) -> None:
         rows = cursor.execute(

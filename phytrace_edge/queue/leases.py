@@ -5,6 +5,8 @@ same time, and a crashed sender's claim expires and its events come back."""
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Iterator
+from typing import Any, NamedTuple
 
 from phytrace_edge.queue.rows import MAX_ID
 
@@ -52,3 +54,43 @@ def take_back(cursor: sqlite3.Cursor, dead_owners: list[str]) -> int:
         )
         taken += cursor.rowcount
     return taken
+
+
+class Chunk(NamedTuple):
+    """Rows no live lease covers, read in one query: all lie within ``low..high``,
+    a stretch free of leases (so deleting ``low..`` a row's last id touches no claim)."""
+
+    low: int
+    high: int
+    rows: list[Any]  # the columns asked for (``id`` first)
+
+
+def unleased(
+    cursor: sqlite3.Cursor,
+    now: float,
+    columns: str,
+    chunk_rows: int,
+    where: str = "",
+    newest_first: bool = False,
+    from_id: int = 0,
+) -> Iterator[Chunk]:
+    """Walk the rows no live lease covers (from ``from_id`` on), oldest first or newest
+    first, up to ``chunk_rows`` a query: ``SELECT <columns> FROM events``, ``columns``
+    starting with ``id``, ``where`` adding a condition. The caller may delete what it
+    was given before asking for more: the walk goes on after each chunk's last row."""
+    ranges = [(max(low, from_id), high) for low, high in free_ranges(cursor, now)]
+    order = "DESC" if newest_first else "ASC"
+    sql = (
+        f"SELECT {columns} FROM events WHERE id BETWEEN ? AND ? {where} ORDER BY id {order} LIMIT ?"
+    )
+    for low, high in reversed(ranges) if newest_first else ranges:
+        while low <= high:
+            rows = cursor.execute(sql, (low, high, chunk_rows)).fetchall()
+            if rows:
+                yield Chunk(low, high, rows)
+            if len(rows) < chunk_rows:
+                break
+            if newest_first:
+                high = rows[-1][0] - 1
+            else:
+                low = rows[-1][0] + 1

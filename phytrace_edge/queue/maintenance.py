@@ -18,23 +18,15 @@ def expire(db: Database, cutoff: float, now: float) -> int:
 
     def delete_expired(cursor: sqlite3.Cursor) -> int:
         expired = 0
-        for low, high in leases.free_ranges(cursor, now):
-            while True:
-                # a frame expires with its newest event: never before the TTL
-                rows = cursor.execute(
-                    "SELECT last_id, coalesce(newest_at, queued_at) FROM events "
-                    "WHERE id BETWEEN ? AND ? ORDER BY id LIMIT ?",
-                    (low, high, EXPIRE_CHUNK),
-                ).fetchall()
-                # ids grow with time: the first fresh row ends the expired prefix
-                fresh_at = next((i for i, row in enumerate(rows) if row[1] >= cutoff), len(rows))
-                old = rows[:fresh_at]
-                if not old:
-                    break
-                expired += delete_range(cursor, low, old[-1][0])
-                low = old[-1][0] + 1
-                if fresh_at < len(rows):
-                    break
+        # a frame expires with its newest event: never before the TTL
+        ages = "id, last_id, coalesce(newest_at, queued_at)"
+        for chunk in leases.unleased(cursor, now, ages, EXPIRE_CHUNK):
+            rows = chunk.rows
+            fresh_at = next((i for i, row in enumerate(rows) if row[2] >= cutoff), len(rows))
+            if fresh_at:
+                expired += delete_range(cursor, chunk.low, rows[fresh_at - 1][1])
+            if fresh_at < len(rows):
+                break  # ids grow with time: the first fresh row ends the expired prefix
         bump_counters(cursor, **{"drop:ttl": expired})
         return expired
 

@@ -499,3 +499,37 @@ def test_the_on_full_policy_is_read_once_into_its_type() -> None:
     assert QueueLimits().makes_room and QueueLimits().on_full is OnFull.THIN
     with pytest.raises(ValueError, match="bogus"):
         QueueLimits(on_full="bogus")
+
+
+def test_the_walk_over_unleased_rows(open_store, clock: Clock) -> None:
+    """``leases.unleased``: every row outside live leases, chunk by chunk, oldest or
+    newest first, from an id on, going on after rows the caller deleted."""
+    from phytrace_edge.queue import leases
+    from phytrace_edge.queue.rows import delete_range
+
+    store = open_store(frame_events=1)  # one row per event
+    store.put_many([event(i) for i in range(10)])
+    claimed = store.claim_batch(3, 10**7)  # rows 1..3 leased
+    assert claimed is not None and [e.id for e in claimed.events] == [1, 2, 3]
+    now = clock()
+
+    def walk(**kwargs: object) -> list[list[int]]:
+        chunks = store._db.write(
+            lambda cursor: list(leases.unleased(cursor, now, "id", 4, **kwargs))
+        )
+        return [[row[0] for row in chunk.rows] for chunk in chunks]
+
+    assert walk() == [[4, 5, 6, 7], [8, 9, 10]]
+    assert walk(newest_first=True) == [[10, 9, 8, 7], [6, 5, 4]]
+    assert walk(from_id=6) == [[6, 7, 8, 9], [10]]
+    assert walk(where="AND id % 2 = 0") == [[4, 6, 8, 10]]
+
+    def delete_as_it_goes(cursor) -> list[int]:
+        seen = []
+        for chunk in leases.unleased(cursor, now, "id, last_id", 2):
+            seen += [row[0] for row in chunk.rows]
+            delete_range(cursor, chunk.low, chunk.rows[-1][1])
+        return seen
+
+    assert store._db.write(delete_as_it_goes) == [4, 5, 6, 7, 8, 9, 10]
+    assert store.counter("depth") == 3  # the leased rows stay
