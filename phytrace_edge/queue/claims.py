@@ -6,7 +6,7 @@ died (``leases.take_back``). Each runs in the caller's transaction."""
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from phytrace_edge.queue import leases
@@ -28,8 +28,8 @@ Range = tuple[int, int]
 Leased = tuple[list[Range], list[StoredRow]]  # the ranges leased and their rows
 
 
-def _sizes(cursor: sqlite3.Cursor, sql: str, params: tuple[Any, ...]) -> list[RowSize]:
-    return [RowSize._make(row) for row in cursor.execute(sql, params)]
+def _sized(rows: Iterable[Any]) -> list[RowSize]:
+    return [RowSize._make(row) for row in rows]
 
 
 def lease_oldest(
@@ -47,7 +47,7 @@ def lease_oldest(
     oldest = next(leases.unleased(cursor, now, SIZE_COLUMNS, limits[0]), None)
     if oldest is None:
         return [], []
-    sizes = [RowSize._make(row) for row in oldest.rows]
+    sizes = _sized(oldest.rows)
     if important_first:
         ahead = _important_in_band(cursor, now, sizes[0].queued_at + BAND_S, limits)
         if ahead:
@@ -69,7 +69,7 @@ def lease_newest(
     one run below the newest, so the lane sends newest first, batch by batch."""
     newest = next(leases.unleased(cursor, now, SIZE_COLUMNS, limits[0], newest_first=True), None)
     # the newest rows no lease covers; if they are older than ``since``, so is all below
-    fresh = _takewhile_since([RowSize._make(row) for row in newest.rows], since) if newest else []
+    fresh = _takewhile_since(_sized(newest.rows), since) if newest else []
     if not fresh:
         return [], []
     kept = _within(fresh, limits)
@@ -101,12 +101,13 @@ def _important_in_band(
 ) -> list[RowSize]:
     """Unleased important rows queued before ``before``, oldest first, within
     ``limits`` (found by the partial index on important rows, not a scan)."""
-    rows = _sizes(
-        cursor,
-        f"SELECT {SIZE_COLUMNS} FROM events AS e "
-        "WHERE important = 1 AND queued_at < ? AND NOT EXISTS (SELECT 1 FROM leases "
-        "WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) ORDER BY id LIMIT ?",
-        (before, now, limits[0]),
+    rows = _sized(
+        cursor.execute(
+            f"SELECT {SIZE_COLUMNS} FROM events AS e "
+            "WHERE important = 1 AND queued_at < ? AND NOT EXISTS (SELECT 1 FROM leases "
+            "WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) ORDER BY id LIMIT ?",
+            (before, now, limits[0]),
+        )
     )
     return rows[: _within(rows, limits)] if rows else []
 

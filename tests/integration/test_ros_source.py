@@ -13,15 +13,16 @@ from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings
 from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.sources.ros import load_rclpy
 from phytrace_edge.ingest.sources.ros_graph import (
     GRAPH_CHECK_S,
     NodeClock,
     subscribe_topics,
     wanted_topics,
 )
-from phytrace_edge.ingest.sources.sim import mock_api
 from phytrace_edge.runtime import wiring
 from phytrace_edge.sim import mock_ros
+from phytrace_edge.sim.mock_ros import as_rclpy
 from phytrace_edge.sim.mock_ros import messages as m
 from phytrace_edge.sim.mock_ros.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -38,7 +39,8 @@ class Graph:
     def __init__(self, **env: str) -> None:
         self.context = mock_ros.Context(virtual_time=True)
         mock_ros.init(context=self.context)
-        self.api = mock_api(self.context)
+        # the mock as the ros input loads rclpy, its nodes and clocks in this context
+        self.api = load_rclpy(as_rclpy.modules(self.context).__getitem__)
         self.robot = self.api.create_node("robot")
         self.events: list[dict] = []
         settings = load_settings(env=env).settings

@@ -15,18 +15,12 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
-from phytrace_edge.ingest.sources.ros import RosSource, load_rclpy
-from phytrace_edge.ingest.sources.ros_graph import NodeClock, RosApi
+from phytrace_edge.ingest.sources.ros import RosSource
+from phytrace_edge.ingest.sources.ros_graph import NodeClock
 from phytrace_edge.sim import mock_ros
 from phytrace_edge.sim.mock_ros import as_rclpy
 from phytrace_edge.sim.robot import DeliveryRobot
 from phytrace_edge.sim.world import World
-
-
-def mock_api(context: mock_ros.Context) -> RosApi:
-    """The mock rclpy as a ``RosApi`` whose nodes and clocks live in ``context``: the
-    same ``load_rclpy`` as the ``ros`` input, over the mock's modules."""
-    return load_rclpy(as_rclpy.modules(context).__getitem__)
 
 
 class SimSource:
