@@ -34,7 +34,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from phytrace_edge.ingest.dispatch import handler_of  # noqa: E402
 from phytrace_edge.ingest.sources import dds_types as t  # noqa: E402
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME  # noqa: E402
 
@@ -137,7 +136,7 @@ def handler_table() -> list[tuple[str, float, float]]:
     rows = []
     for topic, sample in samples().items():
         kind, data = type(sample), sample.serialize()
-        handler = handler_of(TOPIC_BY_NAME[topic].handler)
+        handler = TOPIC_BY_NAME[topic].handler
         alone = median_us(lambda k=kind, d=data: k.deserialize(d))
         full = median_us(lambda k=kind, d=data, h=handler: h(k.deserialize(d)))
         rows.append((topic, alone, full))
@@ -152,7 +151,7 @@ def rclpy_handler_table() -> list[tuple[str, float]]:
     latest = {topic: msg for topic, _, msg in simulate(10.0)}
     rows = []
     for topic, msg in sorted(latest.items()):
-        handler = handler_of(TOPIC_BY_NAME[topic].handler)
+        handler = TOPIC_BY_NAME[topic].handler
         rows.append((topic, median_us(lambda h=handler, m=msg: h(m))))
     return rows
 

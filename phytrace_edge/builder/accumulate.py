@@ -10,6 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from phytrace_edge.ingest.readings import (
+    DeliveryStatusReading,
+    DiagnosticStatusFields,
+    GoalReading,
+)
 from phytrace_edge.udm.event import format_timestamp
 
 MAX_ITEMS_PER_EVENT = 256
@@ -26,12 +31,12 @@ class DiagnosticsTracker:
     if it has cleared since, with the worst level seen and how often it was seen.
     """
 
-    active: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
+    active: dict[tuple[str, str], DiagnosticStatusFields] = field(default_factory=dict)
     pending: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
     alarming: set[tuple[str, str]] = field(default_factory=set)  # at ERROR or STALE now
     alarm_changed: bool = False  # a status entered or left ERROR/STALE since the last take
 
-    def observe(self, statuses: list[dict[str, Any]], at_wall_s: float) -> None:
+    def observe(self, statuses: list[DiagnosticStatusFields], at_wall_s: float) -> None:
         for status in statuses:
             key = (status.get("hardware_id", ""), status["name"])
             self._note_alarm(key, status["level"] in _ALARM_LEVELS)
@@ -87,7 +92,7 @@ class TransitionTracker:
     last_task: str | None = None
     pending: list[dict[str, Any]] = field(default_factory=list)
 
-    def observe(self, reading: dict[str, Any], at_wall_s: float) -> None:
+    def observe(self, reading: DeliveryStatusReading, at_wall_s: float) -> None:
         payload = reading.get("payload", {})
         task = reading.get("task", {})
         state = payload.get("delivery_state") or task.get("status")
@@ -118,7 +123,7 @@ class GoalTracker:
     pending: list[dict[str, Any]] = field(default_factory=list)
     last_key: tuple[Any, ...] | None = None
 
-    def observe(self, reading: dict[str, Any], at_wall_s: float) -> None:
+    def observe(self, reading: GoalReading, at_wall_s: float) -> None:
         goal = reading.get("goal")
         if goal is None:
             return

@@ -15,24 +15,20 @@ Domain rules (docs/udm.md has the field-by-field table):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from phytrace_edge.builder.envelope import classify_stamp, envelope
 from phytrace_edge.ingest.convert import MM, compass_heading_deg, present, rounded
-from phytrace_edge.ingest.topics import TOPIC_BY_NAME
+from phytrace_edge.ingest.readings import Reading, Readings
+from phytrace_edge.ingest.topics import DOMAINS, TOPIC_BY_NAME, TOPICS, Domain
 
 EVENT_TYPE_PERIODIC = "telemetry.periodic"
-DOMAINS = (
-    "location",
-    "motion",
-    "power",
-    "operational",
-    "navigation",
-    "perception",
-    "actuators",
-    "payload",
-)
+# The topics that feed each domain, in table order: the domain's ``sources``.
+DOMAIN_TOPICS: dict[Domain, tuple[str, ...]] = {
+    domain: tuple(spec.name for spec in TOPICS if domain in spec.domains) for domain in DOMAINS
+}
 MOVING_SPEED_MPS = 0.05
 ROTATING_RATE_DPS = 2.0
 
@@ -41,7 +37,7 @@ ROTATING_RATE_DPS = 2.0
 class Latest:
     """The newest reading of one topic and when the bridge received it."""
 
-    reading: dict[str, Any]
+    reading: Reading
     received_mono_s: float
 
 
@@ -78,37 +74,28 @@ def assemble_event(
         for topic, latest in snapshot.latest.items()
         if is_fresh(topic, latest, now_mono_s, stale_after_s)
     }
-    readings = {topic: latest.reading for topic, latest in fresh.items()}
+    readings = cast(Readings, {topic: latest.reading for topic, latest in fresh.items()})
 
     def sources(*topics: str) -> list[dict[str, Any]]:
         return [
             {
                 "topic": topic,
                 "age_s": round(max(0.0, now_mono_s - fresh[topic].received_mono_s), 3),
-                **classify_stamp(readings[topic].get("stamp_ns"), captured_at_s, use_sim_time),
+                **classify_stamp(fresh[topic].reading.get("stamp_ns"), captured_at_s, use_sim_time),
             }
             for topic in topics
             if topic in fresh
         ]
 
     event = envelope(identity, EVENT_TYPE_PERIODIC, captured_at_s, event_id)
-    domains = {
-        "location": (_location(readings), ("/odom", "/gps/fix", "/imu/data")),
-        "motion": (_motion(readings), ("/odom", "/imu/data", "/cmd_vel")),
-        "power": (_power(readings), ("/battery_state",)),
-        "operational": (_operational(readings, snapshot), ("/delivery/status", "/diagnostics")),
-        "navigation": (_navigation(readings, snapshot), ("/goal_pose",)),
-        "perception": (_perception(readings), ("/scan", "/imu/data", "/gps/fix")),
-        "actuators": (_actuators(readings), ("/joint_states",)),
-        "payload": (readings.get("/delivery/status", {}).get("payload"), ("/delivery/status",)),
-    }
-    for name, (domain, topics) in domains.items():
+    for name, build in DOMAIN_BUILDERS.items():
+        domain = build(readings, snapshot)
         if domain:
-            event[name] = {**domain, "sources": sources(*topics)}
+            event[name] = {**domain, "sources": sources(*DOMAIN_TOPICS[name])}
     return event
 
 
-def _location(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _location(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     gps = r.get("/gps/fix", {}).get("gps", {})
     orientation = r.get("/imu/data", {}).get("imu", {}).get("orientation_deg")
     located = "latitude" in gps
@@ -124,7 +111,7 @@ def _location(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     )
 
 
-def _motion(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _motion(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     odom = r.get("/odom", {})
     imu_rates = r.get("/imu/data", {}).get("imu", {}).get("angular_velocity_dps", {})
     linear = odom.get("linear_velocity")
@@ -151,7 +138,7 @@ def _motion_state(speed: float | None, yaw_dps: float | None) -> str | None:
     return "stationary"
 
 
-def _power(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _power(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     battery = r.get("/battery_state")
     if battery is None:
         return {}
@@ -162,7 +149,7 @@ def _power(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     )
 
 
-def _operational(r: dict[str, dict[str, Any]], snapshot: Snapshot) -> dict[str, Any]:
+def _operational(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     delivery = r.get("/delivery/status", {})
     reporting_errors = "/diagnostics" in r or snapshot.errors
     return present(
@@ -173,14 +160,14 @@ def _operational(r: dict[str, dict[str, Any]], snapshot: Snapshot) -> dict[str, 
     )
 
 
-def _navigation(r: dict[str, dict[str, Any]], snapshot: Snapshot) -> dict[str, Any]:
+def _navigation(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     return present(
         goal=r.get("/goal_pose", {}).get("goal"),
         new_goals=snapshot.new_goals or None,
     )
 
 
-def _perception(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _perception(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     lidar = r.get("/scan", {}).get("lidar")
     return present(
         lidar=[lidar] if lidar else None,
@@ -189,6 +176,23 @@ def _perception(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
     )
 
 
-def _actuators(r: dict[str, dict[str, Any]]) -> dict[str, Any]:
+def _actuators(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
     joints = r.get("/joint_states", {}).get("joints")
     return {"joints": joints} if joints else {}
+
+
+def _payload(r: Readings, snapshot: Snapshot) -> dict[str, Any]:
+    return r.get("/delivery/status", {}).get("payload") or {}
+
+
+# How each domain is built from the readings, in the order of the event's keys.
+DOMAIN_BUILDERS: dict[Domain, Callable[[Readings, Snapshot], dict[str, Any]]] = {
+    "location": _location,
+    "motion": _motion,
+    "power": _power,
+    "operational": _operational,
+    "navigation": _navigation,
+    "perception": _perception,
+    "actuators": _actuators,
+    "payload": _payload,
+}

@@ -20,14 +20,23 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
-from typing import Any, NamedTuple, Protocol
+from collections.abc import Callable
+from typing import Any, NamedTuple, Protocol, cast
 
 from phytrace_edge.builder.accumulate import DiagnosticsTracker, GoalTracker, TransitionTracker
-from phytrace_edge.builder.assemble import DOMAINS, Latest, Snapshot, assemble_event, is_fresh
+from phytrace_edge.builder.assemble import Latest, Snapshot, assemble_event, is_fresh
 from phytrace_edge.builder.log_records import LogRecords, log_event
 from phytrace_edge.builder.options import BuilderOptions
 from phytrace_edge.builder.topic_events import TopicEvents, topic_event
 from phytrace_edge.ingest.generic import FieldTypes, rosidl_field_types
+from phytrace_edge.ingest.readings import (
+    DeliveryStatusReading,
+    DiagnosticsReading,
+    GoalReading,
+    LogReading,
+    Reading,
+)
+from phytrace_edge.ingest.topics import DOMAINS
 from phytrace_edge.udm.event import new_event_id
 
 
@@ -79,26 +88,40 @@ class UDMBuilder:
         self.stale_omissions: Counter[str] = Counter()
         self.logs = LogRecords(options.rosout_min_level, options.rosout_burst)
         self.extra = TopicEvents(options.extra_topics, field_types, options.extra_max_array)
+        # What the every-message topics accumulate between two ticks (besides their
+        # latest reading); tests/unit/test_builder.py holds this to the topic table.
+        self.accumulators: dict[str, Callable[[Any, float], None]] = {
+            "/diagnostics": self._observe_diagnostics,
+            "/delivery/status": self._observe_delivery,
+            "/goal_pose": self._observe_goal,
+        }
+
+    def _observe_diagnostics(self, reading: DiagnosticsReading, now_wall: float) -> None:
+        self._diagnostics.observe(reading.get("statuses", []), now_wall)
+
+    def _observe_delivery(self, reading: DeliveryStatusReading, now_wall: float) -> None:
+        self._transitions.observe(reading, now_wall)
+
+    def _observe_goal(self, reading: GoalReading, now_wall: float) -> None:
+        self._goals.observe(reading, now_wall)
 
     @property
     def identity(self) -> dict[str, str]:
         """The UDM ``identity`` of this robot."""
         return dict(self._identity)
 
-    def add_reading(self, topic: str, reading: dict[str, Any]) -> None:
-        """Record ``reading`` as the latest of ``topic`` (a canonical topic name)."""
+    def add_reading(self, topic: str, reading: Reading) -> None:
+        """Record ``reading`` as the latest of ``topic`` (a canonical topic name); a
+        ``/rosout`` record becomes a log record of its own."""
         now_mono, now_wall = self._clock.monotonic(), self._clock.wall()
         if topic == "/rosout":
-            self.logs.observe(reading, now_mono)
+            self.logs.observe(cast(LogReading, reading), now_mono)
             return
         with self._lock:
             self._latest[topic] = Latest(reading, now_mono)
-            if topic == "/diagnostics":
-                self._diagnostics.observe(reading.get("statuses", []), now_wall)
-            elif topic == "/delivery/status":
-                self._transitions.observe(reading, now_wall)
-            elif topic == "/goal_pose":
-                self._goals.observe(reading, now_wall)
+            accumulate = self.accumulators.get(topic)
+            if accumulate is not None:
+                accumulate(reading, now_wall)
 
     def add_message(self, topic: str, msg: Any) -> None:
         """A message of a ``TOPICS_EXTRA`` topic (any type)."""

@@ -17,6 +17,7 @@ from typing import Any
 
 from phytrace_edge.builder.defaults import ROSOUT_LEVELS
 from phytrace_edge.builder.envelope import classify_stamp, envelope
+from phytrace_edge.ingest.readings import LogReading
 
 EVENT_TYPE_LOG = "log.record"
 WINDOW_S = 60.0
@@ -45,7 +46,7 @@ class LogRecords:
         self.counts: Counter[str] = Counter()
         self.suppressed_by_logger: Counter[str] = Counter()
 
-    def observe(self, reading: dict[str, Any], now_mono_s: float) -> None:
+    def observe(self, reading: LogReading, now_mono_s: float) -> None:
         logger = reading["logger"]
         with self._lock:
             if ROSOUT_LEVELS.index(reading["level"]) < self._min_rank:

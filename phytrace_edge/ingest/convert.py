@@ -2,8 +2,9 @@
 text.
 
 Every function here accepts what any of the message flavours carries (rclpy, rosbags,
-Cyclone DDS IDL samples, the mock): Python ints and floats, numpy scalars, ``bytes``
-of length one. Anything that is not a finite number becomes None, so NaN and ±inf
+Cyclone DDS IDL samples, the mock): Python ints and floats, numpy scalars and arrays
+(read through the ``numbers`` ABCs and ``tolist``, so numpy is never imported here),
+``bytes`` of length one. Anything that is not a finite number becomes None, so NaN and ±inf
 never reach an event (JSON has neither, and orjson would silently write ``null``).
 
 Values keep their real precision and no more (docs/udm.md has the table): a float32
@@ -18,12 +19,9 @@ from __future__ import annotations
 
 import math
 import numbers
-from array import array
+import struct
 from collections.abc import Sequence
 from typing import Any
-
-import numpy as np
-import orjson
 
 from phytrace_edge.errors import MalformedMessage
 
@@ -36,7 +34,7 @@ LATLON = 1e7  # 1e-7° (about 1 cm)
 RAD = 1e5  # radians (joint positions): 1e-5 rad
 RAD_S = 1e4  # rad/s: 1e-4 rad/s
 
-_float32 = np.float32
+_FLOAT32 = struct.Struct("<f")
 F32_MAX = 3.4028234663852886e38
 _PLAIN_NUMBERS = {float, int}
 _DEGREES_PER_RADIAN = 180.0 / math.pi
@@ -78,38 +76,47 @@ def snap(number: float, steps: float) -> float:
     return round(scaled) / steps if math.isfinite(scaled) else number
 
 
+def single(number: float) -> float:
+    """A finite double within float32's range, rounded to the nearest float32."""
+    return float(_FLOAT32.unpack(_FLOAT32.pack(number))[0])
+
+
+def shortest_f32(value: float) -> float:
+    """The shortest decimal that reads back as the float32 ``value`` (what numpy
+    prints for a float32). A decimal of d digits that reads back implies one of d + 1
+    does, so the digits are found by bisection over 1..9 (9 always read back)."""
+    low, high = 1, 9
+    while low < high:
+        middle = (low + high) // 2
+        candidate = float(f"{value:.{middle}g}")
+        try:
+            reads_back = single(candidate) == value
+        except OverflowError:  # rounded past float32's largest value
+            reads_back = False
+        if reads_back:
+            high = middle
+        else:
+            low = middle + 1
+    return float(f"{value:.{low}g}")
+
+
 def f32(value: Any) -> float | None:
     """A float32 field at its real precision: the shortest decimal that reads back as
-    the same float32 (numpy's shortest repr of float32), else None."""
+    the same float32, else None."""
     number = finite(value)
     if number is None or not -F32_MAX <= number <= F32_MAX:
         return None
-    return float(str(_float32(number)))
+    return shortest_f32(single(number))
 
 
 def f32_all(values: Sequence[Any], items: Any = ()) -> list[float | None]:
-    """``f32`` of many values at once (a battery's fields, then its cells from
-    ``items``): packed as float32, written by orjson as the shortest decimals (what
-    float32 cannot hold, and NaN, as null) and read back, for about the cost of
-    ``f32`` on four values."""
-    try:
-        if not set(map(type, values)) <= _PLAIN_NUMBERS:
-            raise TypeError("not all plain numbers")
-        packed = array("f", values)
-    except (TypeError, OverflowError):  # a bool, a string, a huge int: value by value
-        packed = array("f", [math.nan if (n := finite(v)) is None else n for v in values])
-    if len(items):
-        if getattr(items, "typecode", None) == "f":  # rclpy's float32 sequences
-            packed.extend(items)
-        else:  # what float32 cannot hold becomes NaN, written as null
-            wide = float_array(items)
-            wide = np.where(np.abs(wide) <= F32_MAX, wide, math.nan)
-            packed.frombytes(wide.astype(_float32).tobytes())
-    array32 = np.frombuffer(packed, dtype=_float32)
-    parsed: list[float | None] = orjson.loads(
-        orjson.dumps(array32, option=orjson.OPT_SERIALIZE_NUMPY)
-    )
-    return parsed
+    """``f32`` of many values (a battery's fields), then of the numbers in ``items``
+    (its cells; what float32 cannot hold is None); an item that is not a number raises
+    TypeError."""
+    converted = [f32(value) for value in values]
+    for item in float_array(items):
+        converted.append(f32(item))
+    return converted
 
 
 def integer(value: Any) -> int | None:
@@ -290,11 +297,20 @@ def sequence_items(msg: Any, name: str, limit: int) -> Any:
         ) from None
 
 
-def float_array(sequence: Any) -> Any:
-    """A numeric sequence as a flat numpy array, without copying where it can: rclpy
-    gives ``array.array('f')``, rosbags and DDS numpy arrays or lists."""
-    if isinstance(sequence, np.ndarray):
-        return sequence.ravel()
-    if getattr(sequence, "typecode", None) in ("f", "d"):
-        return np.frombuffer(sequence, dtype=np.float32 if sequence.typecode == "f" else float)
-    return np.asarray(sequence, dtype=np.float64).ravel()
+def float_array(sequence: Any) -> list[float]:
+    """A numeric sequence as a flat list of floats (NaN and inf kept): rclpy gives
+    ``array.array``, rosbags and DDS numpy arrays (flattened by their own ``ravel``),
+    others lists. An item that is not a number raises TypeError."""
+    if hasattr(sequence, "ravel"):
+        sequence = sequence.ravel()
+    if hasattr(sequence, "tolist"):
+        sequence = sequence.tolist()
+    numbers_only = [item for item in sequence if _is_real(item)]
+    if len(numbers_only) != len(sequence):
+        raise TypeError("an item is not a number")
+    return [float(item) for item in numbers_only]
+
+
+def _is_real(value: Any) -> bool:
+    kind = type(value)
+    return kind is float or kind is int or (kind is not bool and isinstance(value, numbers.Real))

@@ -16,22 +16,12 @@ from collections.abc import Callable
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest import handlers, rosout, status
-from phytrace_edge.ingest.handlers import Reading
+from phytrace_edge.ingest.readings import Reading
 from phytrace_edge.ingest.topics import TOPICS
 
 log = logging.getLogger(__name__)
 
 LOG_EVERY_S = 60.0
-
-
-def handler_of(name: str) -> Callable[[Any], Reading]:
-    """The handler a topic table entry names (``module:function``)."""
-    module, _, function = name.partition(":")
-    found: Callable[[Any], Reading] = getattr(
-        {"handlers": handlers, "status": status, "rosout": rosout}[module], function
-    )
-    return found
 
 
 class Dispatcher:
@@ -45,7 +35,7 @@ class Dispatcher:
         on_other: Callable[[str, Any], None] = lambda topic, msg: None,
     ) -> None:
         self._on_reading, self._on_other = on_reading, on_other
-        self._handlers = {spec.name: handler_of(spec.handler) for spec in TOPICS}
+        self._handlers = {spec.name: spec.handler for spec in TOPICS}
         self._lock = threading.Lock()
         self._last_logged: dict[tuple[str, str], float] = {}
         self.received: Counter[str] = Counter()

@@ -22,11 +22,10 @@ from __future__ import annotations
 
 import base64
 import math
+import numbers
 import re
 from collections.abc import Callable, Mapping
 from typing import Any
-
-import numpy as np
 
 from phytrace_edge.ingest.convert import f32
 
@@ -88,13 +87,13 @@ def _item(value: Any, kind: str, field_types: FieldTypes, max_array: int) -> Any
 
 
 def _scalar(value: Any, kind: str) -> Any:
-    if isinstance(value, (bool, np.bool_)):
+    if isinstance(value, bool) or type(value).__name__ == "bool_":  # numpy's bool
         return bool(value)
     if isinstance(value, (bytes, bytearray)):  # rclpy's ``byte``: one byte as bytes
         return value[0] if len(value) == 1 else base64.b64encode(value).decode("ascii")
-    if isinstance(value, (int, np.integer)):
+    if isinstance(value, numbers.Integral):
         return int(value)
-    if isinstance(value, (float, np.floating)):
+    if isinstance(value, numbers.Real):
         if kind == "float":
             number = f32(value)
             return _MISSING if number is None else number
@@ -110,7 +109,7 @@ def _is_message(value: Any) -> bool:
 
 
 def _head(value: Any, max_array: int) -> Any:
-    if isinstance(value, np.ndarray):
+    if hasattr(value, "tolist"):  # a numpy or ``array.array`` sequence
         return value[:max_array].tolist()
     return value[:max_array] if len(value) > max_array else value
 
@@ -124,8 +123,8 @@ def _blob(value: Any, max_array: int) -> Any:
     of one-byte ``bytes``."""
     if isinstance(value, (list, tuple)):
         raw = b"".join(v if isinstance(v, bytes) else bytes((int(v) & 0xFF,)) for v in value)
-    elif isinstance(value, np.ndarray):
-        raw = value.astype(np.uint8).tobytes()
+    elif hasattr(value, "astype"):  # numpy, read without importing it
+        raw = value.astype("uint8").tobytes()
     else:
         raw = bytes(value)
     text = base64.b64encode(raw[:max_array]).decode("ascii")

@@ -14,9 +14,7 @@ from a handler is a bug the dispatcher counts as ``handler_error``.
 from __future__ import annotations
 
 import math
-from typing import Any
-
-import numpy as np
+from typing import Any, cast
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest.convert import (
@@ -39,14 +37,23 @@ from phytrace_edge.ingest.convert import (
     quaternion_to_rpy_deg,
     rounded,
     sequence_items,
+    single,
     snap,
     text,
     wrap_degrees,
     xyz,
     xyz_deg,
 )
-
-Reading = dict[str, Any]
+from phytrace_edge.ingest.readings import (
+    BatteryReading,
+    GoalReading,
+    ImuReading,
+    JointStateReading,
+    LaserScanReading,
+    NavSatFixReading,
+    OdometryReading,
+    TwistReading,
+)
 
 _VELOCITY_KEYS = ("x_mps", "y_mps", "z_mps")
 _RATE_KEYS = ("roll_dps", "pitch_dps", "yaw_dps")
@@ -74,13 +81,13 @@ _NO_FIX, _FIX, _SBAS_FIX, _GBAS_FIX = -1, 0, 1, 2
 _COVARIANCE_UNKNOWN = 0
 
 
-def handle_odometry(msg: Any) -> Reading:
+def handle_odometry(msg: Any) -> OdometryReading:
     """``nav_msgs/Odometry`` -> local pose (location) and body velocity (motion).
 
     The pose is in ``header.frame_id`` (odom or map), the twist in ``child_frame_id``
     (the robot body, x forward, y left: REP-103).
     """
-    reading = header_fields(msg)
+    reading = cast(OdometryReading, header_fields(msg))
     twist = getattr(getattr(msg, "twist", None), "twist", None)
     local = pose_fields(getattr(getattr(msg, "pose", None), "pose", None))
     if "frame_id" in reading:
@@ -96,7 +103,7 @@ def handle_odometry(msg: Any) -> Reading:
     return reading
 
 
-def handle_battery_state(msg: Any) -> Reading:
+def handle_battery_state(msg: Any) -> BatteryReading:
     """``sensor_msgs/BatteryState`` -> power domain.
 
     ``percentage`` is 0..1 in ROS and becomes ``state_of_charge_pct`` 0..100; a value
@@ -122,7 +129,7 @@ def handle_battery_state(msg: Any) -> Reading:
         )
     except (TypeError, ValueError) as exc:
         raise MalformedMessage("bad_sequence", f"cell_voltage is not numeric ({exc})") from None
-    reading = header_fields(msg)
+    reading = cast(BatteryReading, header_fields(msg))
     reading["battery"] = present(
         voltage_v=voltage,
         current_a=current,
@@ -148,7 +155,7 @@ def handle_battery_state(msg: Any) -> Reading:
     return reading
 
 
-def handle_laser_scan(msg: Any) -> Reading:
+def handle_laser_scan(msg: Any) -> LaserScanReading:
     """``sensor_msgs/LaserScan`` -> one lidar entry of the perception domain.
 
     ``min_range_m``/``max_range_m``/``num_points`` are the sensor's ``range_min``,
@@ -162,40 +169,44 @@ def handle_laser_scan(msg: Any) -> Reading:
         raise MalformedMessage("bad_ranges", f"ranges is not a numeric array ({exc})") from None
     range_min = f32(getattr(msg, "range_min", None))
     range_max = f32(getattr(msg, "range_max", None))
-    bounds_ok = range_min is not None and range_max is not None and 0 <= range_min <= range_max
-    with np.errstate(invalid="ignore"):
-        if bounds_ok:
-            valid = (ranges >= range_min) & (ranges <= range_max)
-        else:  # broken bounds: any finite positive value counts as a return
-            valid = np.isfinite(ranges) & (ranges > 0)
-    valid_count = int(valid.sum())
+    if range_min is not None and range_max is not None and 0 <= range_min <= range_max:
+        # compared as float32, the type of the bounds and of the ranges alike
+        bounds_ok, low, high = True, single(range_min), single(range_max)
+        valid = [r for r in ranges if low <= r <= high]  # NaN compares False: left out
+    else:  # broken bounds: any finite positive value counts as a return
+        bounds_ok = False
+        valid = [r for r in ranges if 0 < r < math.inf]
     closest = bearing = None
-    if valid_count:
-        index = int(np.argmin(np.where(valid, ranges, np.inf)))
-        closest = f32(ranges[index])
+    if valid:
+        nearest = min(valid)
+        index = ranges.index(nearest)  # every item equal to a valid one is valid
+        closest = f32(nearest)
         angle_min = finite(getattr(msg, "angle_min", None))
         increment = finite(getattr(msg, "angle_increment", None))
         if angle_min is not None and increment is not None:
             angle = finite(math.degrees(angle_min + index * increment))
             bearing = None if angle is None else snap(wrap_degrees(angle), MILLIDEGREE)
     head = header_fields(msg)
-    return present(
-        **head,
-        lidar=present(
-            sensor_id=head.get("frame_id") or "laser",
-            min_range_m=range_min if bounds_ok else None,
-            max_range_m=range_max if bounds_ok else None,
-            num_points=int(ranges.size),
-            valid_points=valid_count,
-            closest_range_m=closest,
-            closest_bearing_deg=bearing,
-            angle_min_deg=degrees(getattr(msg, "angle_min", None)),
-            angle_max_deg=degrees(getattr(msg, "angle_max", None)),
+    return cast(
+        LaserScanReading,
+        present(
+            **head,
+            lidar=present(
+                sensor_id=head.get("frame_id") or "laser",
+                min_range_m=range_min if bounds_ok else None,
+                max_range_m=range_max if bounds_ok else None,
+                num_points=len(ranges),
+                valid_points=len(valid),
+                closest_range_m=closest,
+                closest_bearing_deg=bearing,
+                angle_min_deg=degrees(getattr(msg, "angle_min", None)),
+                angle_max_deg=degrees(getattr(msg, "angle_max", None)),
+            ),
         ),
     )
 
 
-def handle_imu(msg: Any) -> Reading:
+def handle_imu(msg: Any) -> ImuReading:
     """``sensor_msgs/Imu`` -> perception.imu (and motion's yaw rate when odom is absent).
 
     By REP-145 an ``orientation_covariance[0]`` of -1 means the IMU gives no
@@ -203,17 +214,20 @@ def handle_imu(msg: Any) -> Reading:
     """
     no_orientation = first_number(getattr(msg, "orientation_covariance", None)) == -1
     rpy = None if no_orientation else quaternion_to_rpy_deg(getattr(msg, "orientation", None))
-    return present(
-        **header_fields(msg),
-        imu=present(
-            orientation_deg={"roll": rpy[0], "pitch": rpy[1], "yaw": rpy[2]} if rpy else None,
-            angular_velocity_dps=xyz_deg(getattr(msg, "angular_velocity", None)),
-            linear_acceleration_mps2=xyz(getattr(msg, "linear_acceleration", None)),
+    return cast(
+        ImuReading,
+        present(
+            **header_fields(msg),
+            imu=present(
+                orientation_deg={"roll": rpy[0], "pitch": rpy[1], "yaw": rpy[2]} if rpy else None,
+                angular_velocity_dps=xyz_deg(getattr(msg, "angular_velocity", None)),
+                linear_acceleration_mps2=xyz(getattr(msg, "linear_acceleration", None)),
+            ),
         ),
     )
 
 
-def handle_twist(msg: Any) -> Reading:
+def handle_twist(msg: Any) -> TwistReading:
     """``geometry_msgs/Twist`` (or ``TwistStamped``) on /cmd_vel -> commanded velocity.
 
     ``angular_z_rps`` is in rad/s, as the reference event names it.
@@ -221,17 +235,20 @@ def handle_twist(msg: Any) -> Reading:
     twist = getattr(msg, "twist", msg)
     linear = getattr(twist, "linear", None)
     head = header_fields(msg) if hasattr(msg, "header") else {}
-    return present(
-        **head,
-        commanded_velocity=present(
-            linear_x_mps=rounded(getattr(linear, "x", None), MM),
-            linear_y_mps=rounded(getattr(linear, "y", None), MM),
-            angular_z_rps=rounded(getattr(getattr(twist, "angular", None), "z", None), RAD_S),
+    return cast(
+        TwistReading,
+        present(
+            **head,
+            commanded_velocity=present(
+                linear_x_mps=rounded(getattr(linear, "x", None), MM),
+                linear_y_mps=rounded(getattr(linear, "y", None), MM),
+                angular_z_rps=rounded(getattr(getattr(twist, "angular", None), "z", None), RAD_S),
+            ),
         ),
     )
 
 
-def handle_nav_sat_fix(msg: Any) -> Reading:
+def handle_nav_sat_fix(msg: Any) -> NavSatFixReading:
     """``sensor_msgs/NavSatFix`` -> perception.gps and location's WGS84 position.
 
     ``status.status`` -1 no fix, 0 fix (3D when altitude is known, else 2D), 1 SBAS,
@@ -258,7 +275,7 @@ def handle_nav_sat_fix(msg: Any) -> Reading:
                 horizontal_accuracy_m=_horizontal_accuracy(msg),
             )
         )
-    return present(**header_fields(msg), gps=gps)
+    return cast(NavSatFixReading, present(**header_fields(msg), gps=gps))
 
 
 def _fix_type(status: int | None, altitude: float | None) -> str:
@@ -286,14 +303,14 @@ def _horizontal_accuracy(msg: Any) -> float | None:
     return snap(math.sqrt(max(east, north)), MM)
 
 
-def handle_pose_stamped(msg: Any) -> Reading:
+def handle_pose_stamped(msg: Any) -> GoalReading:
     """``geometry_msgs/PoseStamped`` on /goal_pose -> navigation goal."""
     head = header_fields(msg)
     pose = pose_fields(getattr(msg, "pose", None))
-    return present(**head, goal=present(frame_id=head.get("frame_id"), **pose))
+    return cast(GoalReading, present(**head, goal=present(frame_id=head.get("frame_id"), **pose)))
 
 
-def handle_joint_state(msg: Any) -> Reading:
+def handle_joint_state(msg: Any) -> JointStateReading:
     """``sensor_msgs/JointState`` -> actuators.joints.
 
     position is rad (or m for prismatic joints), velocity rad/s, effort N·m (or N).
@@ -313,4 +330,7 @@ def handle_joint_state(msg: Any) -> Reading:
             if value is not None:
                 joint[key] = value
         joints.append(joint)
-    return present(**header_fields(msg), joints=joints or None)
+    return cast(
+        JointStateReading,
+        present(**header_fields(msg), joints=joints or None),
+    )

@@ -3,12 +3,13 @@ pure like the other handlers. The builder turns readings into ``log.record`` eve
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest.convert import integer, present, text
-
-Reading = dict[str, Any]
+from phytrace_edge.ingest.readings import (
+    LogReading,
+)
 
 MESSAGE_MAX_CHARS = 2048
 # rcl_interfaces/msg/Log.DEBUG ... FATAL; rcutils also uses the values in between
@@ -20,7 +21,7 @@ def level_name(level: int) -> str:
     return next((name for floor, name in LEVELS if level >= floor), "debug")
 
 
-def handle_log(msg: Any) -> Reading:
+def handle_log(msg: Any) -> LogReading:
     """``rcl_interfaces/msg/Log`` -> ``{level, logger, message, file, function, line,
     stamp_ns}``; a record without a level or a logger name is malformed."""
     level = integer(getattr(msg, "level", None))
@@ -32,12 +33,15 @@ def handle_log(msg: Any) -> Reading:
     seconds = integer(getattr(stamp, "sec", None)) or 0
     nanos = integer(getattr(stamp, "nanosec", None)) or 0
     line = integer(getattr(msg, "line", None))
-    return present(
-        level=level_name(level),
-        logger=logger,
-        message=message[:MESSAGE_MAX_CHARS] if isinstance(message, str) else "",
-        file=text(getattr(msg, "file", None)) or None,
-        function=text(getattr(msg, "function", None)) or None,
-        line=line if line else None,
-        stamp_ns=seconds * 1_000_000_000 + nanos or None,
+    return cast(
+        LogReading,
+        present(
+            level=level_name(level),
+            logger=logger,
+            message=message[:MESSAGE_MAX_CHARS] if isinstance(message, str) else "",
+            file=text(getattr(msg, "file", None)) or None,
+            function=text(getattr(msg, "function", None)) or None,
+            line=line if line else None,
+            stamp_ns=seconds * 1_000_000_000 + nanos or None,
+        ),
     )

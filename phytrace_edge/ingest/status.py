@@ -3,21 +3,27 @@ status): ROS message -> reading, pure functions like those of ``handlers.py``.""
 
 from __future__ import annotations
 
-from typing import Any
-
-import orjson
+import json
+from typing import Any, cast
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest.convert import header_fields, integer, present, sequence_items, text
-
-Reading = dict[str, Any]
+from phytrace_edge.ingest.readings import (
+    DeliveryStatusReading,
+    DiagnosticsReading,
+)
 
 DELIVERY_STATUS_MAX_BYTES = 64 * 1024
 # diagnostic_msgs/DiagnosticStatus.OK/WARN/ERROR/STALE
 DIAGNOSTIC_LEVELS = {0: "ok", 1: "warn", 2: "error", 3: "stale"}
 
 
-def handle_diagnostic_array(msg: Any) -> Reading:
+def _no_constants(name: str) -> Any:
+    """NaN and Infinity are not JSON, whatever Python's parser allows."""
+    raise ValueError(f"{name} is not JSON")
+
+
+def handle_diagnostic_array(msg: Any) -> DiagnosticsReading:
     """``diagnostic_msgs/DiagnosticArray`` -> statuses with levels ok/warn/error/stale.
 
     The level is ``bytes`` (b'\\x02') in rclpy and ``int`` in rosbags and DDS; an
@@ -35,7 +41,7 @@ def handle_diagnostic_array(msg: Any) -> Reading:
                 hardware_id=text(getattr(status, "hardware_id", None)) or None,
             )
         )
-    return present(**header_fields(msg), statuses=statuses)
+    return cast(DiagnosticsReading, present(**header_fields(msg), statuses=statuses))
 
 
 # /delivery/status JSON key -> (reading section, field)
@@ -51,7 +57,7 @@ _DELIVERY_FIELDS = {
 }
 
 
-def handle_delivery_status(msg: Any) -> Reading:
+def handle_delivery_status(msg: Any) -> DeliveryStatusReading:
     """``std_msgs/String`` holding a JSON object on /delivery/status -> task and payload.
 
     Raises ``MalformedMessage`` when the text is not a JSON object or is over 64 KiB.
@@ -63,9 +69,9 @@ def handle_delivery_status(msg: Any) -> Reading:
         raise MalformedMessage("not_text", f"data is {type(raw).__name__}, not a string")
     if len(raw) > DELIVERY_STATUS_MAX_BYTES:
         raise MalformedMessage("too_large", f"{len(raw)} bytes > {DELIVERY_STATUS_MAX_BYTES}")
-    try:
-        document = orjson.loads(raw)
-    except orjson.JSONDecodeError as exc:
+    try:  # the standard library's parser: this module is on the start-up path of `config`
+        document = json.loads(raw, parse_constant=_no_constants)
+    except (ValueError, RecursionError) as exc:
         raise MalformedMessage("bad_json", str(exc)[:120]) from None
     if not isinstance(document, dict):
         raise MalformedMessage("not_object", f"JSON {type(document).__name__}, not an object")
@@ -85,11 +91,14 @@ def handle_delivery_status(msg: Any) -> Reading:
         task.setdefault("task_id", payload["order_id"])
     if "package_id" in payload:
         task["payload_id"] = payload["package_id"]
-    return present(
-        task=task or None,
-        payload=payload or None,
-        state=sections["operational"].get("state"),
-        rejected_fields=rejected or None,
+    return cast(
+        DeliveryStatusReading,
+        present(
+            task=task or None,
+            payload=payload or None,
+            state=sections["operational"].get("state"),
+            rejected_fields=rejected or None,
+        ),
     )
 
 

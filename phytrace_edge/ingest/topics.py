@@ -1,5 +1,8 @@
-"""The topic table: the ten ROS 2 topics of the reference guide, ``/rosout``, and how
-each is read; and ``ExtraTopic``, an entry of ``TOPICS_EXTRA`` (any other topic).
+"""The topic table: the ten ROS 2 topics of the reference guide and ``/rosout``, each
+with its type, handler, UDM domains and how it is heard; and ``ExtraTopic``, an entry
+of ``TOPICS_EXTRA`` (any other topic). Adding a topic is one row here, its handler,
+its reading in ``readings.py`` and, for a new domain, that domain's builder in
+``builder/assemble.py``; README's topic table is checked against this one.
 
 Two flags say how a topic's messages are treated:
 
@@ -14,35 +17,51 @@ Two flags say how a topic's messages are treated:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
 
+from phytrace_edge.ingest import handlers, rosout, status
+from phytrace_edge.ingest.readings import Reading
+
+Domain = Literal[
+    "location",
+    "motion",
+    "power",
+    "operational",
+    "navigation",
+    "perception",
+    "actuators",
+    "payload",
+]
+DOMAINS: tuple[Domain, ...] = (
+    "location",
+    "motion",
+    "power",
+    "operational",
+    "navigation",
+    "perception",
+    "actuators",
+    "payload",
+)
+Handler = Callable[[Any], Reading]
+
+
+@dataclass(frozen=True)
 class TopicSpec:
-    """One row of the topic table. ``handler`` names the function that reads the
-    topic's messages, as ``module:function`` in ``phytrace_edge.ingest``: the settings
-    read this table at every start, so it imports nothing (not the handlers, not
-    ``dataclasses``)."""
+    """One row of the topic table: the topic, its ROS 2 type, the handler that reads
+    its messages, the UDM domains its readings feed (each domain's ``sources`` lists
+    the topics that feed it), and how it is heard (``every_message``: reliable and
+    every message kept; ``latched``: transient local is asked for when the
+    publishers offer it, and the value never goes stale)."""
 
-    __slots__ = (
-        "also_types",
-        "domains",
-        "every_message",
-        "handler",
-        "latched",
-        "name",
-        "type_name",
-    )
-
-    def __init__(
-        self,
-        name: str,
-        type_name: str,
-        handler: str,
-        domains: tuple[str, ...],
-        every_message: bool = False,
-        latched: bool = False,
-        also_types: tuple[str, ...] = (),  # other types the handler reads on this topic
-    ) -> None:
-        self.name, self.type_name, self.handler, self.domains = name, type_name, handler, domains
-        self.every_message, self.latched, self.also_types = every_message, latched, also_types
+    name: str
+    type_name: str
+    handler: Handler
+    domains: tuple[Domain, ...]
+    every_message: bool = False
+    latched: bool = False
+    also_types: tuple[str, ...] = ()  # other types the handler reads on this topic
 
     @property
     def type_names(self) -> tuple[str, ...]:
@@ -50,57 +69,59 @@ class TopicSpec:
 
 
 TOPICS: tuple[TopicSpec, ...] = (
-    TopicSpec("/odom", "nav_msgs/msg/Odometry", "handlers:handle_odometry", ("location", "motion")),
+    TopicSpec("/odom", "nav_msgs/msg/Odometry", handlers.handle_odometry, ("location", "motion")),
     TopicSpec(
-        "/battery_state",
-        "sensor_msgs/msg/BatteryState",
-        "handlers:handle_battery_state",
-        ("power",),
+        "/battery_state", "sensor_msgs/msg/BatteryState", handlers.handle_battery_state, ("power",)
     ),
-    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", "handlers:handle_laser_scan", ("perception",)),
-    TopicSpec("/imu/data", "sensor_msgs/msg/Imu", "handlers:handle_imu", ("perception", "motion")),
+    TopicSpec("/scan", "sensor_msgs/msg/LaserScan", handlers.handle_laser_scan, ("perception",)),
+    TopicSpec(
+        "/imu/data",
+        "sensor_msgs/msg/Imu",
+        handlers.handle_imu,
+        # the orientation gives location's compass heading; the yaw rate, motion's
+        ("location", "motion", "perception"),
+    ),
     TopicSpec(
         "/cmd_vel",
         "geometry_msgs/msg/Twist",
-        "handlers:handle_twist",
+        handlers.handle_twist,
         ("motion",),
         also_types=("geometry_msgs/msg/TwistStamped",),  # what Jazzy's nav2 publishes
     ),
     TopicSpec(
         "/gps/fix",
         "sensor_msgs/msg/NavSatFix",
-        "handlers:handle_nav_sat_fix",
+        handlers.handle_nav_sat_fix,
         ("location", "perception"),
     ),
     TopicSpec(
         "/diagnostics",
         "diagnostic_msgs/msg/DiagnosticArray",
-        "status:handle_diagnostic_array",
+        status.handle_diagnostic_array,
         ("operational",),
         every_message=True,
     ),
     TopicSpec(
         "/goal_pose",
         "geometry_msgs/msg/PoseStamped",
-        "handlers:handle_pose_stamped",
+        handlers.handle_pose_stamped,
         ("navigation",),
         every_message=True,
         latched=True,
     ),
     TopicSpec(
-        "/joint_states", "sensor_msgs/msg/JointState", "handlers:handle_joint_state", ("actuators",)
+        "/joint_states", "sensor_msgs/msg/JointState", handlers.handle_joint_state, ("actuators",)
     ),
     TopicSpec(
         "/delivery/status",
         "std_msgs/msg/String",
-        "status:handle_delivery_status",
+        status.handle_delivery_status,
         ("operational", "payload"),
         every_message=True,
         latched=True,
     ),
-    TopicSpec(
-        "/rosout", "rcl_interfaces/msg/Log", "rosout:handle_log", (), every_message=True
-    ),  # ROS logs: log.record events, not a domain
+    # ROS logs: log.record events of their own, not a domain
+    TopicSpec("/rosout", "rcl_interfaces/msg/Log", rosout.handle_log, (), every_message=True),
 )
 
 TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
@@ -109,6 +130,7 @@ TOPIC_NAMES = tuple(TOPIC_BY_NAME)
 EXTRA_MODES = ("sample", "on_change")
 
 
+@dataclass(frozen=True)
 class ExtraTopic:
     """One entry of ``TOPICS_EXTRA``: a topic outside the table, shipped as
     ``telemetry.topic`` events (docs/configuration.md, "Any other topic").
@@ -117,27 +139,11 @@ class ExtraTopic:
     ``mode`` ``sample`` sends the latest message at most ``rate_hz`` times a second;
     ``on_change`` only when its data changed (numbers by more than ``deadband``)."""
 
-    __slots__ = ("deadband", "mode", "name", "rate_hz", "type_name")
-
-    def __init__(
-        self,
-        name: str,
-        type_name: str = "",
-        rate_hz: float = 1.0,
-        mode: str = "sample",
-        deadband: float = 0.0,
-    ) -> None:
-        self.name, self.type_name, self.rate_hz = name, type_name, rate_hz
-        self.mode, self.deadband = mode, deadband
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, ExtraTopic) and self.describe() == other.describe()
-
-    def __hash__(self) -> int:
-        return hash(self.describe())
-
-    def __repr__(self) -> str:
-        return f"ExtraTopic({self.describe()!r})"
+    name: str
+    type_name: str = ""
+    rate_hz: float = 1.0
+    mode: str = "sample"
+    deadband: float = 0.0
 
     def describe(self) -> str:
         """The entry in TOPICS_EXTRA's text form."""

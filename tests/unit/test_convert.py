@@ -129,6 +129,18 @@ def test_float32_fields_are_written_at_their_real_precision(source: float, writt
     assert np.float32(f32(value)) == np.float32(value)  # and it reads back as the same float32
 
 
+def test_f32_writes_what_numpy_prints_for_a_float32() -> None:
+    """The bridge does not import numpy; numpy's float32 printing is the reference."""
+    import random
+
+    rng = random.Random(7)
+    values = [rng.uniform(-1e3, 1e3) for _ in range(3000)]
+    values += [10.0 ** rng.uniform(-40, 38) for _ in range(3000)]  # subnormals to the top
+    values += [3.4028234663852886e38, 1.401298464324817e-45, 0.1, 100.0, -0.0]
+    for value in values:
+        assert f32(value) == float(str(np.float32(value))), value
+
+
 def test_f32_all_takes_fields_and_an_array_and_drops_what_is_not_a_number() -> None:
     from array import array
 

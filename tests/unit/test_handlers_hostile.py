@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 from types import SimpleNamespace as NS
-from typing import Any
+from typing import Any, get_type_hints
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
@@ -14,10 +14,10 @@ from hypothesis import strategies as st
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest.dispatch import handler_of
 from phytrace_edge.ingest.topics import TOPICS
 from phytrace_edge.udm.schema import find_violation
 from tests.conftest import FakeClock, non_finite_values
+from tests.unit.test_topic_table import undeclared_keys
 
 hostile_float = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
@@ -155,9 +155,10 @@ MESSAGES = {
 def _handle(topic: str, msg: Any) -> dict | None:
     spec = next(spec for spec in TOPICS if spec.name == topic)
     try:
-        reading = handler_of(spec.handler)(msg)
+        reading: dict[str, Any] = dict(spec.handler(msg))
     except MalformedMessage:
         return None
+    assert undeclared_keys(reading, get_type_hints(spec.handler)["return"]) == []
     reading.pop("rejected_fields", None)
     return reading
 
