@@ -8,7 +8,7 @@ from typing import Any
 
 from phytrace_edge.config import Settings, load_settings
 from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.runtime.health import report
 
 
@@ -45,10 +45,10 @@ class InProcessBridge:
 
     def status(self) -> dict[str, Any]:
         """What ``status --json`` says now, after a fresh heartbeat."""
-        self.service.heartbeat(running=True)
+        self.service.heartbeat.write(running=True)
         now = self.service.store.now()
-        stats = read_stats(wiring.queue_path(self.settings), now)
-        return report(stats, wiring.health_thresholds(self.settings), now)
+        stats = read_stats(options.queue_path(self.settings), now)
+        return report(stats, options.health_thresholds(self.settings), now)
 
     def stop(self) -> None:
         """As at SIGTERM; once."""

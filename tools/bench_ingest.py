@@ -151,6 +151,8 @@ def rclpy_handler_table() -> list[tuple[str, float]]:
     latest = {topic: msg for topic, _, msg in simulate(10.0)}
     rows = []
     for topic, msg in sorted(latest.items()):
+        if topic not in TOPIC_BY_NAME:  # the robot's extra topic (TOPICS_EXTRA): no handler
+            continue
         handler = TOPIC_BY_NAME[topic].handler
         rows.append((topic, median_us(lambda h=handler, m=msg: h(m))))
     return rows
@@ -162,11 +164,9 @@ def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    from phytrace_edge.builder.builder import UDMBuilder
-    from phytrace_edge.builder.options import BuilderOptions, Identity
-    from phytrace_edge.ingest.dispatch import Dispatcher
-    from phytrace_edge.ingest.sources.bag import BagClock, replay
-    from phytrace_edge.ingest.sources.base import Feed
+    from phytrace_edge.config import load_settings
+    from phytrace_edge.ingest.sources.registry import create_source
+    from phytrace_edge.runtime import options, wiring
     from phytrace_edge.sim.recorder import record_simulation
 
     bag = workdir / "large"
@@ -179,13 +179,17 @@ def replay_table(workdir: Path, seconds: int) -> tuple[int, float, float]:
             reader.deserialize(raw, connection.msgtype)
     bare = messages / (time.perf_counter() - started)
 
-    clock = BagClock()
-    builder = UDMBuilder(BuilderOptions(Identity("bench", "amr"), stale_after_s=5.0), clock=clock)
-    dispatcher = Dispatcher(builder.add_reading)
+    # the bridge's own pipeline for a bag, as fast as it goes; events built, not queued
+    settings = load_settings(
+        env={"BRIDGE_INPUT": f"bag:{bag}", "REPLAY_RATE": "0", "STALE_AFTER_S": "5"}
+    ).settings
+    source = create_source(options.source_options(settings, {}))
+    pipeline = wiring.build_pipeline(settings, source, lambda built: None)
     started = time.perf_counter()
-    feed = Feed(dispatcher.on_message, lambda at: builder.build_event(captured_at_s=at), 0.2)
-    replay(str(bag), {topic: topic for topic in TOPIC_BY_NAME}, {}, feed, clock, 0, th.Event())
+    pipeline.open()
+    pipeline.ingest(th.Event(), lambda: None)
     ours = messages / (time.perf_counter() - started)
+    pipeline.source.stop()
     return messages, bare, ours
 
 

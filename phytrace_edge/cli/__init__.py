@@ -13,15 +13,12 @@ import importlib
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from phytrace_edge._version import __version__
 from phytrace_edge.cli import common
 from phytrace_edge.config import ros_parameters, settings_from_environment
 from phytrace_edge.errors import EXIT_INTERRUPTED, EXIT_OK, PhytraceError
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
 
 # command -> its module, imported when used: one run of the CLI needs one of them
 COMMANDS = {
@@ -82,7 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             env_file=getattr(args, "env_file", None),
         )
         if args.logs:
-            from phytrace_edge.runtime.wiring import configure_logging
+            from phytrace_edge.runtime.options import configure_logging
 
             configure_logging(loaded.settings, os.environ)
         code: int = args.handler(args, loaded)

@@ -4,15 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import Any, NoReturn
 
 from phytrace_edge.config import setting_infos
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import format_bytes
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from collections.abc import Callable
-    from typing import Any, NoReturn
 
 SETTING_PREFIX = "setting_"
 HELP_WIDTH = 100

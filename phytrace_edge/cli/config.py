@@ -9,11 +9,6 @@ from phytrace_edge.config import LoadedSettings, setting_infos
 
 LOGS = False
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    pass
-
-
 NAME = "config"
 HELP = "print the effective settings and their sources"
 

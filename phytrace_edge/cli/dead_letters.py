@@ -6,18 +6,13 @@ import argparse
 import sys
 
 from phytrace_edge.cli.common import checked
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.config.parsers import int_between, non_negative_float, path_value
 from phytrace_edge.errors import EXIT_OK, ConfigError
-from phytrace_edge.runtime import wiring
 
 ID = int_between(1, 2**63 - 1)
 LIMIT = int_between(1, 10**6)
 DAYS = non_negative_float(36500)
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
-
 
 NAME = "dead-letters"
 HELP = "list, export, requeue or purge events PhyCloud rejected"
@@ -51,6 +46,8 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     ids = args.ids or None
     if args.action == "purge" and ids is None and args.older_than_days is None and not args.all:
         raise ConfigError("purge needs ids, --older-than-days or --all")
+    from phytrace_edge.runtime import wiring
+
     with wiring.open_queue(loaded.settings) as store:
         box = store.dead_letters
         if args.action == "list":

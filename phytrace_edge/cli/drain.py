@@ -7,14 +7,9 @@ import sys
 import time
 
 from phytrace_edge.cli.common import add_timeout_flag, stop_on_signals
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
-from phytrace_edge.runtime import wiring
 from phytrace_edge.units import format_bytes
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
-
 
 NAME = "drain"
 HELP = "send the whole backlog now, with a progress bar"
@@ -28,12 +23,11 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Send the whole backlog now; exit 0 only when the queue is empty at the end."""
     from tqdm import tqdm
 
-    from phytrace_edge.ship.sender import Sender
+    from phytrace_edge.runtime import wiring
 
-    settings = loaded.settings
     started = time.monotonic()
-    with wiring.open_queue(settings) as store:
-        sender = Sender(store, wiring.http_transport(settings), wiring.send_policy(settings))
+    with wiring.shipping(loaded.settings) as parts:
+        store, sender = parts.store, parts.sender
         stop_on_signals(sender.stop)
         depth = store.counter("depth")
         with tqdm(total=depth, unit="ev", desc="draining", file=sys.stderr, disable=None) as bar:
@@ -45,7 +39,6 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
             deadline = None if args.timeout is None else started + args.timeout
             empty = sender.drain(deadline=deadline, progress=progress)
         left = store.counter("depth")
-        sender.transport.close()
     elapsed = time.monotonic() - started
     if empty:
         print(f"drained {sender.stats.events_sent} event(s) in {elapsed:.1f} s; the queue is empty")

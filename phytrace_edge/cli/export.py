@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from phytrace_edge.cli.common import checked, error
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.config.parsers import byte_size
 from phytrace_edge.errors import (
     EXIT_NOT_RUNNING,
@@ -14,12 +15,8 @@ from phytrace_edge.errors import (
     ConfigError,
     QueueError,
 )
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options
 from phytrace_edge.units import format_bytes
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
 
 NAME = "export"
 HELP = (
@@ -42,12 +39,13 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
     from tqdm import tqdm
 
+    from phytrace_edge.runtime import wiring
     from phytrace_edge.ship.export import export_backlog
 
     settings, out = loaded.settings, Path(args.out)
-    if not Path(wiring.queue_path(settings)).exists():
+    if not Path(options.queue_path(settings)).exists():
         error(
-            f"no queue at {wiring.queue_path(settings)}: the bridge never ran with this QUEUE_PATH"
+            f"no queue at {options.queue_path(settings)}: the bridge never ran with this QUEUE_PATH"
         )
         return EXIT_NOT_RUNNING
     if out.exists() or out.with_name(out.name + ".part").exists():

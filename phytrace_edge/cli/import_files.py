@@ -6,16 +6,15 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from phytrace_edge.cli.common import add_timeout_flag, error, stop_on_signals
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, QueueError
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from pathlib import Path
-
-    from phytrace_edge.config import LoadedSettings
+if TYPE_CHECKING:  # the store and sender load their libraries: run() imports them
     from phytrace_edge.queue.store import QueueStore
     from phytrace_edge.ship.sender import Sender
 
@@ -24,7 +23,6 @@ HELP = (
     "upload hand-carry files made by export to PhyCloud; exit 0 when every event of "
     "every file was delivered"
 )
-IMPORT_LEASE_S = 600.0
 CHUNK_EVENTS = 20_000  # staged, then sent, at a time: the staging queue stays small
 
 
@@ -35,34 +33,23 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Each file in turn: read it into a staging queue, then send that queue empty."""
-    import dataclasses
     import tempfile
-    from pathlib import Path
 
-    from phytrace_edge.queue.defaults import OnFull
-    from phytrace_edge.queue.options import QueueLimits
-    from phytrace_edge.queue.store import QueueStore
-    from phytrace_edge.ship.sender import Sender
+    from phytrace_edge.runtime import wiring
 
-    settings = loaded.settings
     deadline = None if args.timeout is None else time.monotonic() + args.timeout
-    # strictly oldest first: the staging queue only feeds the sender
-    policy = dataclasses.replace(wiring.send_policy(settings), live_share=0.0)
-    # a chunk at a time: never full, and events days old must not expire while staged
-    limits = QueueLimits(on_full=OnFull.DROP_NEWEST, ttl_s=10 * 365 * 86400.0)
-    state_dir = Path(wiring.queue_path(settings)).parent
+    state_dir = options.queue_path(loaded.settings).parent
     state_dir.mkdir(parents=True, exist_ok=True)
     complete = True
-    with tempfile.TemporaryDirectory(prefix="import-", dir=state_dir) as staging:
-        path = Path(staging) / "queue.db"
-        with QueueStore.open(path, limits=limits, lease_s=IMPORT_LEASE_S) as store:
-            sender = Sender(store, wiring.http_transport(settings), policy)
-            stop_on_signals(sender.stop)
-            for file in args.files:
-                complete = _import_one(Path(file), store, sender, deadline) and complete
-                if sender.stop.is_set():
-                    break
-            sender.transport.close()
+    with (
+        tempfile.TemporaryDirectory(prefix="import-", dir=state_dir) as staging,
+        wiring.staging(loaded.settings, Path(staging) / "queue.db") as parts,
+    ):
+        stop_on_signals(parts.sender.stop)
+        for file in args.files:
+            complete = _import_one(Path(file), parts.store, parts.sender, deadline) and complete
+            if parts.sender.stop.is_set():
+                break
     return EXIT_OK if complete else EXIT_UNHEALTHY
 
 

@@ -6,15 +6,9 @@ import argparse
 import os
 import time
 
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, StageFailedError
-from phytrace_edge.runtime import wiring
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
-
-WATCHDOG_IDLE_S = 5.0
-POLL_S = 0.2
 DUPLICATE_SIGNAL_S = 1.0  # a second signal sooner is the first one delivered twice
 
 
@@ -39,6 +33,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     import signal
     import threading
 
+    from phytrace_edge.runtime import watchdog, wiring
     from phytrace_edge.runtime.sd_notify import SystemdNotifier
 
     log = logging.getLogger("phytrace_edge")
@@ -56,26 +51,8 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
     signal.signal(signal.SIGTERM, on_signal)
     signal.signal(signal.SIGINT, on_signal)
-    notifier = SystemdNotifier(os.environ)
     service = wiring.build_service(loaded.settings, os.environ, args.ros_args)
-    log.info("%s", service.summary())
-    service.start()
-    notifier.ready(service.status_line())
-    # feed the watchdog only while every stage of the service makes progress
-    interval = notifier.watchdog_s / 2 if notifier.watchdog_s else WATCHDOG_IDLE_S
-    next_check = time.monotonic() + interval
-    while not stop.wait(POLL_S):
-        if service.finished.is_set() or service.supervisor.failed.is_set():
-            break
-        if time.monotonic() < next_check:
-            continue
-        next_check = time.monotonic() + interval
-        if service.healthy():
-            notifier.watchdog(service.status_line())
-        else:
-            log.error("a stage of the service makes no progress; letting the watchdog act")
-    notifier.stopping()
-    service.shutdown(loaded.settings.shutdown_grace_s)
+    watchdog.serve(service, SystemdNotifier(os.environ), stop)
     if service.supervisor.failed.is_set():
         raise StageFailedError(f"{service.supervisor.failure} - exiting so it is restarted")
     finished = service.finished_input()

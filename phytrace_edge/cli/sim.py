@@ -5,13 +5,9 @@ from __future__ import annotations
 import argparse
 
 from phytrace_edge.cli.common import checked, print_json
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.config.parsers import int_between, path_value
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
-
 
 NAME = "sim"
 HELP = "run the simulated delivery robot through the bridge"

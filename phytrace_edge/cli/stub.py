@@ -5,15 +5,12 @@ from __future__ import annotations
 import argparse
 
 from phytrace_edge.cli.common import checked
+from phytrace_edge.config import LoadedSettings
 from phytrace_edge.config.parsers import int_between, non_negative_float, path_value
 from phytrace_edge.errors import EXIT_OK, ConfigError
 
 FRACTION = non_negative_float(1)
 ERROR_STATUS = int_between(400, 599)
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from phytrace_edge.config import LoadedSettings
 
 TAKES_SETTINGS = False
 

@@ -9,11 +9,14 @@ text go out: the API key is never part of the status document.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
+from phytrace_edge.builder.builder import Built
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.ingest.convert import present
+from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.runtime.health import Thresholds, report
 
 EVENT_TYPE_HEALTH = "bridge.health"
 PROBLEMS_MAX = 64
@@ -92,3 +95,31 @@ def _topic(figures: Mapping[str, Any]) -> dict[str, Any]:
         publishers=figures.get("publishers"),
         qos_incompatible=figures.get("qos_incompatible"),
     )
+
+
+class HealthEvents:
+    """Emits a ``bridge.health`` event when one is due (see the module doc)."""
+
+    def __init__(
+        self,
+        interval_s: float,
+        thresholds: Thresholds | None,
+        identity: Mapping[str, str],
+        started_at: float,
+        emit: Callable[[Built], None],
+    ) -> None:
+        self._schedule = HealthSchedule(interval_s if thresholds is not None else 0.0)
+        self._thresholds = thresholds
+        self._identity = dict(identity)
+        self._started_at = started_at
+        self._emit = emit
+
+    def emit_if_due(self, stats: QueueStats, now: float, trigger: str | None = None) -> None:
+        """An event when the schedule says so, or now with ``trigger`` (``stop``)."""
+        if self._thresholds is None or not self._schedule.interval_s:
+            return
+        document = report(stats, self._thresholds, now)
+        trigger = self._schedule.trigger(document["healthy"], now) if trigger is None else trigger
+        if trigger is not None:
+            event = health_event(self._identity, document, trigger, now - self._started_at, now)
+            self._emit(Built(event, important=trigger != "interval"))

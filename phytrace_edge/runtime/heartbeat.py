@@ -1,16 +1,23 @@
 """The running service's figures, as ``status`` (another process) and the metrics see
 them: per-second rates, per-topic figures and the document the heartbeat writes into
-the queue every ``HEARTBEAT_S``."""
+the queue every ``HEARTBEAT_S`` (``Heartbeat``)."""
 
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from phytrace_edge._version import __version__
 from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime.options import ServiceOptions
+from phytrace_edge.runtime.outlet import Outlet
+from phytrace_edge.runtime.pipeline import Pipeline
+from phytrace_edge.runtime.supervisor import Supervisor
+from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.stats import SendStats
 
 HEARTBEAT_S = 2.0
@@ -90,3 +97,82 @@ def service_document(
         "stages": dict(stages),
         **extra,
     }
+
+
+class Heartbeat:
+    """Reads the figures of the running parts; ``write`` puts them into the queue
+    file for ``status``, ``figures`` hands them to the metrics endpoint."""
+
+    def __init__(
+        self,
+        options: ServiceOptions,
+        pipeline: Pipeline,
+        store: QueueStore,
+        sender: Sender,
+        outlet: Outlet,
+        supervisor: Supervisor,
+        started_at: float,
+    ) -> None:
+        self.options, self.pipeline, self.store = options, pipeline, store
+        self.sender, self.outlet, self.supervisor = sender, outlet, supervisor
+        self.started_at = started_at
+        self._rates = Rates()
+
+    def topics(self, rates: Mapping[str, float]) -> dict[str, dict[str, Any]]:
+        known = self.pipeline.source.topic_stats()
+        for topic, counts in self.pipeline.builder.side_counts().items():
+            known[topic] = {**known.get(topic, {}), **counts}
+        dispatcher = self.pipeline.dispatcher
+        return topic_report(
+            dispatcher.received,
+            dispatcher.rejected,
+            self.pipeline.builder.topic_ages(),
+            known,
+            rates,
+        )
+
+    def stages(self) -> dict[str, dict[str, Any]]:
+        sup = self.supervisor
+        ages = sup.progress_ages()
+        return {
+            name: {
+                "restarts": sup.restarts.get(name, 0),
+                "progress_age_s": ages.get(name),
+                "stall_after_s": self.options.stall_after_s,
+                **({"failed": sup.failure} if name == sup.failed_worker else {}),
+            }
+            for name in sup.workers
+        }
+
+    def figures(self) -> Figures:
+        """The live figures the metrics endpoint shows."""
+        return Figures(
+            queue=self.store.stats(),
+            sender=self.sender.stats,
+            events_built=self.outlet.events_built,
+            writer_dropped=self.outlet.writer.events_dropped,
+            topics=self.topics(self._rates.rates),
+            thread_restarts=dict(self.supervisor.restarts),
+            now=self.store.now(),
+        )
+
+    def write(self, running: bool) -> None:
+        """Write the figures `status` shows (another process reads them)."""
+        counters = {
+            "send": self.sender.stats.events_sent,
+            **{f"topic:{t}": n for t, n in self.pipeline.dispatcher.received.items()},
+        }
+        rates = self._rates.update(counters, time.time())
+        o = self.options
+        document = service_document(
+            {"input": o.input_label, "source_id": o.source_id, "endpoint_host": o.endpoint_host},
+            {**self.sender.stats.as_dict(), "send_rate_eps": rates.get("send", 0.0)},
+            self.topics(rates),
+            self.stages(),
+            {
+                "events_built": self.outlet.events_built,
+                "writer_dropped": self.outlet.writer.events_dropped,
+            },
+            self.started_at,
+        )
+        self.store.write_service_state(document, running)

@@ -10,13 +10,12 @@ each line then starts with its syslog priority (``<4>`` for WARNING, sd-daemon(3
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import sys
 from collections.abc import Iterable, Mapping
 from typing import Any
-
-import orjson
 
 from phytrace_edge.redact import leak_forms, redact
 from phytrace_edge.udm.event import format_timestamp
@@ -66,7 +65,8 @@ class JsonFormatter(logging.Formatter):
         }
         if record.exc_info:
             document["exception"] = record.exc_text or self.formatException(record.exc_info)
-        return orjson.dumps(document).decode()
+        # the standard library's encoder: this module is on every command's start-up path
+        return json.dumps(document, ensure_ascii=False, separators=(",", ":"))
 
 
 class RedactSecrets(logging.Filter):

@@ -13,6 +13,8 @@ import os
 import socket
 from collections.abc import Mapping
 
+from phytrace_edge.ship.stats import SendStats
+
 
 class SystemdNotifier:
     def __init__(self, env: Mapping[str, str]) -> None:
@@ -40,3 +42,10 @@ class SystemdNotifier:
 
     def stopping(self) -> None:
         self.notify(STOPPING="1", STATUS="stopping: flushing the queue")
+
+
+def status_line(depth: int, stats: SendStats, now: float) -> str:
+    """One line for `systemctl status`: the queue, what was sent, the last outcome."""
+    last = "never" if stats.last_success_at is None else f"{now - stats.last_success_at:.0f} s ago"
+    line = f"{depth} queued, {stats.events_sent} sent, last success {last}"
+    return line + (f", last error {stats.last_error}" if stats.last_error else "")

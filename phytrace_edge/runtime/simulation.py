@@ -1,9 +1,10 @@
 """``run_simulation``: the simulated delivery robot through ingest and build, end to end.
 
-The robot and the bridge's subscriptions share one mock ROS context. By default time
+The robot and the bridge's node share one mock ROS context, and the bridge hears the
+robot through the ``ros`` input's own code (take-at-tick included). By default time
 is virtual, so 100 robot cycles (10 s of robot time at 10 Hz) run in a fraction of a
-second; ``realtime=True`` runs at wall-clock pace. Events go through the same
-dispatcher, builder and sample tick as ``phytrace-edge run``, then to ``sink``.
+second; ``realtime=True`` runs at wall-clock pace. Events go through the pipeline
+``runtime/wiring.py`` builds for ``phytrace-edge run``, then to ``sink``.
 """
 
 from __future__ import annotations
@@ -14,12 +15,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from phytrace_edge.builder.builder import Built, UDMBuilder
-from phytrace_edge.builder.sampler import Sampler
+from phytrace_edge.builder.builder import Built
 from phytrace_edge.config import Settings
-from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.sources.base import Feed
-from phytrace_edge.ingest.sources.sim import SimSource
 from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import check_event
 
@@ -46,7 +43,6 @@ def run_simulation(
     """
     if num_ticks < 0:
         raise ValueError("num_ticks must be >= 0")
-    settings = settings or Settings()
     collected: list[Event] = []
     sink = sink or collected.append
     counts = {"sent": 0, "failed": 0}
@@ -64,35 +60,25 @@ def run_simulation(
         else:
             counts["sent"] += 1
 
-    options = wiring.source_options(
-        settings, {}, seed=seed, virtual_time=not realtime, max_ticks=num_ticks
+    pipeline = wiring.simulation_pipeline(
+        settings, emit, seed=seed, realtime=realtime, max_ticks=num_ticks
     )
-    source = SimSource(options)
-    builder_options = wiring.builder_options(settings)
-    builder = UDMBuilder(builder_options, source.clock, source.field_types)
-    sampler = Sampler(builder, emit, builder_options.sample_rate_hz, before_tick=source.before_tick)
     started = time.monotonic()
     stop = threading.Event()
-    ticker = threading.Thread(target=sampler.run, args=(stop,), name="sampler", daemon=True)
+    ticker = threading.Thread(target=pipeline.tick, args=(stop, lambda: None), name="sampler")
     try:
-        source.start(
-            Feed(
-                Dispatcher(builder.add_reading, builder.add_message).on_message,
-                sampler.tick,
-                sampler.period_s,
-            )
-        )
-        if not source.keeps_time:
+        pipeline.open()
+        if pipeline.ticks_itself:
             ticker.start()
-        source.run(stop, lambda: None)
+        pipeline.ingest(stop, lambda: None)
     finally:
         stop.set()
         if ticker.is_alive():
             ticker.join()
-        source.stop()
+        pipeline.source.stop()
     return {
         "events_sent": counts["sent"],
         "events_failed": counts["failed"],
-        "topics_seen": builder.topics_seen(),
+        "topics_seen": pipeline.builder.topics_seen(),
         "duration_s": round(time.monotonic() - started, 3),
     }

@@ -27,13 +27,19 @@ DEFAULT_BACKOFF_MIN_S = 0.5
 DEFAULT_BACKOFF_MAX_S = 30.0
 
 
+Loop = Callable[[threading.Event, Beat], None]
+
+
 @dataclass
 class Worker:
-    """A named loop: ``run(beat)`` until its ``stop`` event is set. A ``finite`` loop
-    may also return on its own when its work is done (a replayed bag)."""
+    """A named loop: ``run(stop, beat)`` until ``stop`` is set, which only
+    ``Supervisor.stop`` does: every loop stops the same way. A loop whose owner also
+    waits on a stop event of its own (the writer's hand-off, the sender's backoff)
+    lends that event here. A ``finite`` loop may also return on its own when its work
+    is done (a replayed bag)."""
 
     name: str
-    run: Callable[[Beat], None]
+    run: Loop
     stop: threading.Event = field(default_factory=threading.Event)
     finite: bool = False
     done: threading.Event = field(default_factory=threading.Event)
@@ -103,7 +109,7 @@ class Supervisor:
         while not worker.stop.is_set():
             started = self._monotonic()
             try:
-                worker.run(lambda: self._beat(worker.name))
+                worker.run(worker.stop, lambda: self._beat(worker.name))
             except Exception as exc:
                 now = self._monotonic()
                 if now - started > self.window_s:

@@ -1,14 +1,17 @@
-"""The composition root: the one module that reads ``Settings`` and wires the stages.
+"""The composition root: the one place the parts are built and connected.
 
-It turns the settings into each stage's plain options (whose defaults the stages own)
-and builds the parts of the service. Everything else receives plain values.
+``runtime/options.py`` turns the settings into each part's options; this module
+builds the parts from them: the pipeline (source -> dispatcher -> builder -> sampler
+-> emit) for ``run``, ``run_simulation`` and the tests, the service around it, and the
+queue and sender that ``drain``, ``import`` and ``export`` use. These two modules
+are the only readers of ``Settings``.
 
 The dependency rule of the package (checked by ``tests/unit/test_architecture.py``),
 each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
                              -> builder -> ingest -> sim
-    everything -> udm, units, redact, errors
+    everything -> udm, units, redact, errors, _version
 
 ``stub`` (the PhyCloud dev stub) stands apart: only the CLI starts it, and it uses only
 ``udm`` and ``errors``. No stage imports ``config`` or ``runtime``; the simulator
@@ -17,179 +20,102 @@ imports nothing of the bridge.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+import dataclasses
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
-# The parts are imported where they are built: ``status`` reads its settings through
-# this module and must start fast (stdlib only at import, docs/benchmarks.md).
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
+from phytrace_edge.builder.builder import Built, UDMBuilder
+from phytrace_edge.builder.sampler import Sampler
+from phytrace_edge.config import Settings
+from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.sources.base import Source
+from phytrace_edge.ingest.sources.registry import create_source
+from phytrace_edge.queue.defaults import OnFull
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.ownership import ServiceLock
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime import options
+from phytrace_edge.runtime.health_events import HealthEvents
+from phytrace_edge.runtime.heartbeat import Heartbeat
+from phytrace_edge.runtime.outlet import Outlet
+from phytrace_edge.runtime.pipeline import Pipeline
+from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
+from phytrace_edge.runtime.service import BridgeService
+from phytrace_edge.runtime.supervisor import Supervisor
+from phytrace_edge.runtime.writer import QueueWriter
+from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.transport import HttpTransport, Transport
 
-    from phytrace_edge.builder.options import BuilderOptions, Identity
-    from phytrace_edge.config import Settings
-    from phytrace_edge.ingest.sources.base import SourceOptions
-    from phytrace_edge.queue.store import QueueStore
-    from phytrace_edge.runtime.health import Thresholds
-    from phytrace_edge.runtime.service import BridgeService, ServiceOptions
-    from phytrace_edge.ship.options import SendPolicy
-    from phytrace_edge.ship.transport import HttpTransport, Transport
-
-MIN_STALL_S = 30.0
-
-
-def configure_logging(s: Settings, env: Mapping[str, str]) -> None:
-    """Logging as LOG_LEVEL and LOG_FORMAT say, with the API key masked; ``env`` tells
-    whether stderr is systemd's journal."""
-    from phytrace_edge.runtime.logs import configure_logging as configure
-
-    configure(s.log_level, s.log_format, [s.phycloud_api_key.reveal()], env)
-
-
-def identity(s: Settings) -> Identity:
-    from phytrace_edge.builder.options import Identity
-
-    return Identity(s.source_id, s.source_type, s.fleet_id, s.site_id)
+# A file being imported is staged a chunk at a time: never full, and events days old
+# must not expire while staged.
+STAGING_LIMITS = QueueLimits(on_full=OnFull.DROP_NEWEST, ttl_s=10 * 365 * 86400.0)
+STAGING_LEASE_S = 600.0  # a chunk of a file is sent before its claims lapse
 
 
-def builder_options(s: Settings) -> BuilderOptions:
-    from phytrace_edge.builder.options import BuilderOptions
+def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -> Pipeline:
+    """``source`` -> dispatcher -> builder -> sampler -> ``emit``."""
+    builder = UDMBuilder(options.builder_options(s), source.clock, source.field_types)
+    sampler = Sampler(builder, emit, s.sample_rate_hz, before_tick=source.before_tick)
+    return Pipeline(source, Dispatcher(builder.add_reading, builder.add_message), builder, sampler)
 
-    return BuilderOptions(
-        identity(s),
-        s.sample_rate_hz,
-        s.stale_after_s,
-        s.use_sim_time,
-        extra_topics=s.topics_extra,
-        extra_max_array=s.extra_max_array,
-        rosout_min_level=s.rosout_min_level,
-        rosout_burst=s.rosout_burst,
+
+def simulation_pipeline(
+    s: Settings | None, emit: Callable[[Built], None], *, seed: int, realtime: bool, max_ticks: int
+) -> Pipeline:
+    """The simulated robot through the ``ros`` input's path (``run_simulation``)."""
+    simulated = (s or Settings()).replace(bridge_input="sim")
+    source_options = options.source_options(
+        simulated, {}, seed=seed, virtual_time=not realtime, max_ticks=max_ticks
     )
-
-
-def source_options(
-    s: Settings, env: Mapping[str, str], ros_args: Sequence[str] = (), **simulator: Any
-) -> SourceOptions:
-    """BRIDGE_INPUT and the topic settings; ``env`` is read for ROS 2's DDS variables."""
-    from phytrace_edge.ingest.sources.base import SourceOptions
-
-    kind, _, bag_path = s.bridge_input.partition(":")
-    domain_id, localhost_only = 0, False
-    if kind == "dds":
-        from phytrace_edge.ingest.sources.dds import domain_settings
-
-        domain_id, localhost_only = domain_settings(env)
-    return SourceOptions(
-        kind=kind,
-        topics=s.topics,
-        extra_topics={
-            extra.name: (s.extra_topics[extra.name], extra.type_name) for extra in s.topics_extra
-        },
-        qos_overrides=s.topic_qos or {},
-        bag_path=bag_path,
-        replay_rate=s.replay_rate,
-        ros_args=tuple(ros_args),
-        parameters=ros_parameter_values(s) if kind in ("ros", "sim") else {},
-        dds_domain_id=domain_id,
-        dds_localhost_only=localhost_only,
-        dds_cyclonedds_uri=env.get("CYCLONEDDS_URI", "") if kind == "dds" else "",
-        **simulator,
-    )
-
-
-def ros_parameter_values(s: Settings) -> dict[str, tuple[Any, str]]:
-    """Every setting that has a value, as a ROS parameter (name -> (value, its doc
-    line)), for ``ros2 param list/get``; never the API key. A value ROS has no type
-    for (a table, a set) is given as text."""
-    from phytrace_edge.config import setting_infos
-
-    parameters: dict[str, tuple[Any, str]] = {}
-    for info in setting_infos():
-        value = getattr(s, info.key)
-        if info.key == "phycloud_api_key" or value is None or value in ((), frozenset(), {}):
-            continue
-        if not isinstance(value, (bool, int, float, str)):
-            value = str(value)
-        parameters[info.key] = (value, info.doc)
-    return parameters
-
-
-def queue_path(s: Settings) -> str:
-    return str(s.queue_path)
+    return build_pipeline(simulated, create_source(source_options), emit)
 
 
 def open_queue(s: Settings) -> QueueStore:
-    """The queue named by the settings, its claims leased as the send policy needs."""
-    from phytrace_edge.queue.options import QueueLimits
-    from phytrace_edge.queue.store import QueueStore
-    from phytrace_edge.ship.options import claim_lease_s
-
+    """The queue named by the settings."""
+    q = options.queue_options(s)
     return QueueStore.open(
-        queue_path(s),
-        limits=QueueLimits(
-            max_bytes=s.queue_max_bytes,
-            max_events=s.queue_max_events,
-            on_full=s.queue_on_full,
-            ttl_s=s.queue_ttl_s,
-        ),
-        compression=s.queue_compression,
-        sync=s.queue_sync,
-        lease_s=claim_lease_s(send_policy(s), s.http_timeout_s),
-    )
-
-
-def send_policy(s: Settings) -> SendPolicy:
-    from phytrace_edge.ship.options import SendPolicy
-
-    return SendPolicy(
-        batch_size=s.batch_size,
-        backlog_batch_size=s.backlog_batch_size,
-        requests_in_flight=s.requests_in_flight,
-        live_share=s.live_share,
-        important_first=s.backfill_important_first,
-        batch_max_bytes=s.batch_max_bytes,
-        flush_interval_s=s.flush_interval_s,
-        retry_min_s=s.retry_min_s,
-        retry_max_s=s.retry_max_s,
-        http_compression=s.http_compression,
-        upload_max_bps=s.upload_max_bps,
+        q.path, limits=q.limits, compression=q.compression, sync=q.sync, lease_s=q.lease_s
     )
 
 
 def http_transport(s: Settings) -> HttpTransport:
-    from phytrace_edge.ship.transport import HttpTransport
-
     return HttpTransport(s.phycloud_endpoint, s.phycloud_api_key, s.http_timeout_s, s.ca_bundle)
 
 
-def health_thresholds(s: Settings) -> Thresholds:
-    from phytrace_edge.runtime.health import Thresholds
+@dataclass(frozen=True)
+class Shipping:
+    """A queue and the sender that empties it (``drain``, ``import``)."""
 
-    return Thresholds(
-        s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
-    )
+    store: QueueStore
+    sender: Sender
 
 
-def service_options(s: Settings) -> ServiceOptions:
-    from urllib.parse import urlsplit
+@contextmanager
+def shipping(s: Settings) -> Iterator[Shipping]:
+    """The robot's queue and its sender, as ``run`` would send it (``drain``)."""
+    with open_queue(s) as store:
+        parts = Shipping(store, Sender(store, http_transport(s), options.send_policy(s)))
+        try:
+            yield parts
+        finally:
+            parts.sender.transport.close()
 
-    from phytrace_edge.runtime.service import ServiceOptions
 
-    return ServiceOptions(
-        input_label=s.bridge_input,
-        source_id=s.source_id,
-        source_type=s.source_type,
-        endpoint_host=urlsplit(s.phycloud_endpoint).netloc,
-        sample_rate_hz=s.sample_rate_hz,
-        shutdown_grace_s=s.shutdown_grace_s,
-        stall_after_s=max(MIN_STALL_S, 3 * s.http_timeout_s),
-        metrics_host=s.metrics_host,
-        metrics_port=s.metrics_port,
-        # a bag replay is history, not a running robot: no health events of its own
-        health_event_interval_s=0.0
-        if s.bridge_input.startswith("bag:")
-        else (s.health_event_interval_s),
-        thresholds=health_thresholds(s),
-    )
+@contextmanager
+def staging(s: Settings, path: Path) -> Iterator[Shipping]:
+    """A staging queue at ``path`` and a sender that sends it strictly oldest first
+    (``import``: the staging queue only feeds the sender)."""
+    policy = dataclasses.replace(options.send_policy(s), live_share=0.0)
+    with QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store:
+        parts = Shipping(store, Sender(store, http_transport(s), policy))
+        try:
+            yield parts
+        finally:
+            parts.sender.transport.close()
 
 
 def build_service(
@@ -199,31 +125,48 @@ def build_service(
     transport: Transport | None = None,
     on_event: Callable[[dict[str, Any]], None] | None = None,
 ) -> BridgeService:
-    """Every part of the bridge, wired; ``transport`` replaces HTTP in tests."""
-    from pathlib import Path
-
-    from phytrace_edge.builder.builder import UDMBuilder
-    from phytrace_edge.ingest.sources.registry import create_source
-    from phytrace_edge.queue.ownership import ServiceLock
-    from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
-    from phytrace_edge.runtime.service import BridgeService
-    from phytrace_edge.ship.sender import Sender
-
-    warn_if_not_on_a_volume(Path(queue_path(s)), env)
-    source = create_source(source_options(s, env, ros_args))
-    lock = ServiceLock(Path(queue_path(s)))  # one `run` per queue file
+    """Every part of the bridge, wired; ``transport`` replaces HTTP in tests and
+    ``on_event`` sees every event built."""
+    path = options.queue_path(s)
+    warn_if_not_on_a_volume(path, env)
+    source = create_source(options.source_options(s, env, ros_args))
+    lock = ServiceLock(path)  # one `run` per queue file
     try:
         store = open_queue(s)
     except BaseException:
         lock.release()
         raise
     try:
-        sender = Sender(store, transport or http_transport(s), send_policy(s))
-        builder = UDMBuilder(builder_options(s), source.clock, source.field_types)
-        service = BridgeService(service_options(s), store, sender, source, builder, on_event)
+        service = _service(s, source, store, transport or http_transport(s), on_event)
     except BaseException:
         store.close()
         lock.release()
         raise
     service.on_stopped(lock.release)
     return service
+
+
+def _service(
+    s: Settings,
+    source: Source,
+    store: QueueStore,
+    transport: Transport,
+    on_event: Callable[[dict[str, Any]], None] | None,
+) -> BridgeService:
+    service_options = options.service_options(s)
+    started_at = time.time()
+    sender = Sender(store, transport, options.send_policy(s))
+    outlet = Outlet(QueueWriter(store), wait_for_disk=source.keeps_time, on_event=on_event)
+    pipeline = build_pipeline(s, source, outlet.emit)
+    supervisor = Supervisor()
+    heartbeat = Heartbeat(service_options, pipeline, store, sender, outlet, supervisor, started_at)
+    health_events = HealthEvents(
+        service_options.health_event_interval_s,
+        service_options.thresholds,
+        pipeline.builder.identity,
+        started_at,
+        outlet.emit,
+    )
+    return BridgeService(
+        service_options, pipeline, store, sender, outlet, heartbeat, health_events, supervisor
+    )

@@ -69,14 +69,16 @@ class QueueWriter:
         with self._lock:
             return len(self._pending)
 
-    def run(self, beat: Callable[[], None]) -> None:
+    def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
+        """Write what is handed over until ``stop`` (this writer's ``stop``, lent to
+        its worker), then what is left."""
         while True:
             self._wake.wait(IDLE_BEAT_S)
             self._wake.clear()
             while self._write_group():
                 beat()
             beat()
-            if self.stop.is_set() and not self.backlog():
+            if stop.is_set() and not self.backlog():
                 return
 
     def _write_group(self) -> bool:

@@ -104,10 +104,12 @@ class Sender:
 
     # ------------------------------------------------------------------ loops
 
-    def run(self, beat: Callable[[], None] = lambda: None) -> None:
-        """Send until ``stop`` is set; the backlog drains on a timer, not only when new
-        events arrive. ``beat`` is called as the loop makes progress (and while it
-        waits out a backoff), for the supervisor."""
+    def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:
+        """Send until ``stop`` is set (this sender's ``stop``, lent to its worker); the
+        backlog drains on a timer, not only when new events arrive. ``beat`` is called
+        as the loop makes progress (and while it waits out a backoff), for the
+        supervisor."""
+        assert stop is self.stop, "the sender waits on its own stop event"
         self._beat = beat
         self._pipeline(drain=False)
 

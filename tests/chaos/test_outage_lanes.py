@@ -76,14 +76,14 @@ def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinne
     built: list[dict] = []
     important: set[str] = set()
     service = build_service(settings, {}, on_event=built.append)
-    queue_event = service.writer.put
+    queue_event = service.outlet.writer.put
 
     def note_class(event: Built, wait: bool = False) -> None:  # the builder's own verdict
         if event.important:
             important.add(event.event["event_id"])
         queue_event(event, wait)
 
-    service.writer.put = note_class  # type: ignore[method-assign]
+    service.outlet.writer.put = note_class  # type: ignore[method-assign]
     service.start()
     try:
         wait_for(lambda: stub.stats()["unique"] >= 20, 30, "the first events at the stub")

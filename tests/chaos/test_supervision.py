@@ -8,7 +8,7 @@ from pathlib import Path
 
 from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.runtime.health import report
 from phytrace_edge.ship.responses import Reply
 from tests.processes import wait_for
@@ -53,10 +53,10 @@ def test_a_sender_thread_killed_by_an_exception_is_restarted_and_the_backlog_dra
         # the two failing requests may be on the wire at once: one restart, or two
         wait_for(lambda: service.supervisor.restarts["sender"] >= 1, 30, "a sender restart")
         wait_for(lambda: service.sender.stats.events_sent > 20, 30, "sending to resume")
-        service.heartbeat(running=True)
+        service.heartbeat.write(running=True)
         document = report(
-            read_stats(wiring.queue_path(settings), service.store.now()),
-            wiring.health_thresholds(settings),
+            read_stats(options.queue_path(settings), service.store.now()),
+            options.health_thresholds(settings),
             service.store.now(),
         )
         restarts = service.supervisor.restarts["sender"]

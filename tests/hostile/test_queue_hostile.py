@@ -19,7 +19,7 @@ import pytest
 from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.runtime.health import report
 from tests.processes import BridgeProcess, python_env, run_cli, wait_for
 
@@ -87,10 +87,10 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
         wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
 
         def status_now() -> dict:
-            service.heartbeat(running=True)
+            service.heartbeat.write(running=True)
             now = time.time()
-            stats = read_stats(wiring.queue_path(settings), now)
-            return report(stats, wiring.health_thresholds(settings), now)
+            stats = read_stats(options.queue_path(settings), now)
+            return report(stats, options.health_thresholds(settings), now)
 
         # sending works again, so status soon says healthy (a stage that waited out the
         # lock may show its wait for a heartbeat or two)

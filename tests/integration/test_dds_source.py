@@ -18,15 +18,11 @@ pytest.importorskip("cyclonedds", reason="the DDS input needs cyclonedds (pip in
 from cyclonedds.idl import IdlStruct
 
 from phytrace_edge.builder.assemble import DOMAINS
-from phytrace_edge.builder.builder import UDMBuilder
-from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import load_settings
 from phytrace_edge.errors import ConfigError
-from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources import dds_types
-from phytrace_edge.ingest.sources.base import Feed
 from phytrace_edge.ingest.sources.dds import DdsSource, domain_config, domain_settings
-from phytrace_edge.runtime import wiring
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
 from tests.ros.known import KNOWN, check_known_event
@@ -114,18 +110,15 @@ class DdsInput:
             env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds", "TOPICS_EXTRA": extras}
         ).settings
         self.events: list[dict] = []
-        self.source = DdsSource(wiring.source_options(settings, env))
-        builder = UDMBuilder(wiring.builder_options(settings), field_types=self.source.field_types)
-        self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
-        sampler = Sampler(
-            builder,
-            lambda built: self.events.append(built.event),
-            10,
-            before_tick=self.source.before_tick,
+        self.source = DdsSource(options.source_options(settings, env))
+        self.pipeline = wiring.build_pipeline(
+            settings, self.source, lambda built: self.events.append(built.event)
         )
+        self.dispatcher = self.pipeline.dispatcher
         self._stop = threading.Event()
-        self.source.start(Feed(self.dispatcher.on_message, sampler.tick, sampler.period_s))
-        threading.Thread(target=sampler.run, args=(self._stop,), daemon=True).start()
+        self.pipeline.open()
+        self._ticker = threading.Thread(target=self.pipeline.tick, args=(self._stop, lambda: None))
+        self._ticker.start()
 
     def event_with_every_domain(self, during: Callable[[], None] = lambda: None) -> dict:
         def found() -> dict | None:
@@ -136,6 +129,7 @@ class DdsInput:
 
     def close(self) -> None:
         self._stop.set()
+        self._ticker.join(10)
         self.source.stop()
 
 

@@ -8,19 +8,11 @@ import math
 
 import pytest
 
-from phytrace_edge.builder.builder import UDMBuilder
-from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings
-from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.sources.ros import load_rclpy
-from phytrace_edge.ingest.sources.ros_graph import (
-    GRAPH_CHECK_S,
-    NodeClock,
-    subscribe_topics,
-    wanted_topics,
-)
-from phytrace_edge.runtime import wiring
+from phytrace_edge.ingest.sources.ros import RosSource
+from phytrace_edge.ingest.sources.ros_graph import GRAPH_CHECK_S, NodeClock
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.sim import mock_ros
 from phytrace_edge.sim.mock_ros import as_rclpy
 from phytrace_edge.sim.mock_ros import messages as m
@@ -38,33 +30,27 @@ class Graph:
 
     def __init__(self, **env: str) -> None:
         self.context = mock_ros.Context(virtual_time=True)
-        mock_ros.init(context=self.context)
-        # the mock as the ros input loads rclpy, its nodes and clocks in this context
-        self.api = load_rclpy(as_rclpy.modules(self.context).__getitem__)
-        self.robot = self.api.create_node("robot")
+        modules = as_rclpy.modules(self.context)
+        modules["rclpy"].init()
         self.events: list[dict] = []
-        settings = load_settings(env=env).settings
-        options = wiring.source_options(settings, {})
-        builder = UDMBuilder(wiring.builder_options(settings), clock=NodeClock(self.api))
-        self.dispatcher = Dispatcher(builder.add_reading, builder.add_message)
-        node = self.api.create_node("phytrace_edge")
-        # as the ros input does: state streams taken at the tick
-        self.subscriber = subscribe_topics(
-            self.api,
-            node,
-            wanted_topics(dict(options.topics), dict(options.extra_topics)),
-            self.dispatcher.on_message,
-            dict(options.qos_overrides),
-            take_at_tick=True,
+        settings = load_settings(env={"BRIDGE_INPUT": "ros", **env}).settings
+        # the ros input itself, over the mock's modules (the simulator's way)
+        self.source = RosSource(options.source_options(settings, {}), modules.__getitem__)
+        self.api = self.source.api
+        self.source.clock = NodeClock(self.api)  # virtual time, as the simulator's source
+        self.robot = self.api.create_node("robot")
+        pipeline = wiring.build_pipeline(
+            settings, self.source, lambda b: self.events.append(b.event)
         )
-        sampler = Sampler(
-            builder,
-            lambda built: self.events.append(built.event),
-            settings.sample_rate_hz,
-            before_tick=self.subscriber.take_latest,
+        pipeline.open()
+        self.dispatcher = pipeline.dispatcher
+        self.executor = self.source.executor
+        self.executor.add_node(self.robot)
+        # in virtual time the sample tick is a timer of the bridge's node
+        steady = self.api.clock("steady")
+        self.source.node.create_timer(
+            pipeline.sampler.period_s, pipeline.sampler.tick, clock=steady
         )
-        node.create_timer(sampler.period_s, sampler.tick, clock=self.api.clock("steady"))
-        self.executor = mock_ros.SingleThreadedExecutor(self.context, [self.robot, node])
 
     def run(self, seconds: float) -> None:
         end = self.context.time_source.steady_ns() + int(seconds * 1e9)
@@ -73,6 +59,10 @@ class Graph:
 
     def received(self, topic: str) -> int:
         return self.dispatcher.received[topic]
+
+    @property
+    def subscriber(self):
+        return self.source.subscriber
 
     def subscription(self, topic: str):
         return self.subscriber.subscribed.get(topic)

@@ -324,12 +324,12 @@ def test_the_sim_input_declares_the_settings_read_only_without_the_key() -> None
     from phytrace_edge.config import load_settings
     from phytrace_edge.ingest.sources.base import Feed
     from phytrace_edge.ingest.sources.sim import SimSource
-    from phytrace_edge.runtime import wiring
+    from phytrace_edge.runtime import options
 
     settings = load_settings(
         env={"SOURCE_ID": "amr-7", "SAMPLE_RATE_HZ": "2", "PHYCLOUD_API_KEY": "secret-key"}
     ).settings
-    source = SimSource(wiring.source_options(settings.replace(bridge_input="sim"), {}))
+    source = SimSource(options.source_options(settings.replace(bridge_input="sim"), {}))
     source.start(Feed(lambda topic, msg: None, lambda at: True, 0.5))
     try:
         (node,) = [n for n in source._context.nodes if n.get_name() == "phytrace_edge"]

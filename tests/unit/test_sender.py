@@ -318,7 +318,7 @@ def test_stop_while_retrying_releases_the_batch(store) -> None:
         return Reply(503, {}, b"")
 
     s = Sender(store, FunctionTransport(down), SendPolicy(), stop=stop, sleep=stop.wait)
-    s.run()
+    s.run(s.stop)
     assert store.stats().depth == 5 and store.stats().leased == 0
 
 
@@ -382,7 +382,7 @@ def test_an_idle_sender_still_says_it_is_alive(store) -> None:
     while idle, or status and the systemd watchdog would take it for hung."""
     beats: list[float] = []
     s = sender(store, FakeCloud(), flush_interval_s=0.05)
-    worker = threading.Thread(target=s.run, args=(lambda: beats.append(time.monotonic()),))
+    worker = threading.Thread(target=s.run, args=(s.stop, lambda: beats.append(time.monotonic())))
     worker.start()
     try:
         wait_for(lambda: len(beats) >= 3, 10, "the idle sender's beats")

@@ -22,16 +22,16 @@ def test_a_failing_worker_is_restarted_and_its_traceback_logged_once_per_failure
     runs: list[int] = []
     done = threading.Event()
 
-    def flaky(beat) -> None:
+    def flaky(stop, beat) -> None:
         runs.append(1)
         if len(runs) <= 2:
             raise RuntimeError(f"boom {len(runs)}")
         beat()
         done.set()
-        worker.stop.wait()
+        stop.wait()  # the worker's own event, handed to its loop
 
     supervisor = fast_supervisor()
-    worker = supervisor.start(Worker("flaky", flaky))
+    supervisor.start(Worker("flaky", flaky))
     try:
         wait_for(done.is_set, 10, "the third run")
     finally:
@@ -43,7 +43,7 @@ def test_a_failing_worker_is_restarted_and_its_traceback_logged_once_per_failure
 
 
 def test_too_many_failures_in_the_window_give_up_with_the_reason() -> None:
-    def broken(beat) -> None:
+    def broken(stop, beat) -> None:
         raise ValueError("queue unreadable")
 
     supervisor = fast_supervisor(max_restarts=3, window_s=60)
@@ -58,7 +58,7 @@ def test_too_many_failures_in_the_window_give_up_with_the_reason() -> None:
 def test_a_finite_worker_that_returns_is_done_and_not_restarted() -> None:
     calls: list[int] = []
     supervisor = fast_supervisor()
-    worker = supervisor.start(Worker("ingest", lambda beat: calls.append(1), finite=True))
+    worker = supervisor.start(Worker("ingest", lambda stop, beat: calls.append(1), finite=True))
     assert worker.done.wait(5)
     assert calls == [1] and supervisor.restarts["ingest"] == 0
     assert "ingest" not in supervisor.progress_ages()
@@ -70,12 +70,12 @@ def test_progress_ages_tell_a_stuck_worker_from_a_busy_one() -> None:
     release = threading.Event()
     beating = threading.Event()
 
-    def busy(beat) -> None:
+    def busy(stop, beat) -> None:
         while not release.wait(0.01):
             beat()
             beating.set()
 
-    def stuck(beat) -> None:
+    def stuck(stop, beat) -> None:
         release.wait()
 
     supervisor.start(Worker("busy", busy))

@@ -117,7 +117,7 @@ class RosSource:
             raise ConfigError(import_error_message(exc)) from None
         self.node: Any = None
         self.executor: Any = None
-        self._subscriber: TopicSubscriber | None = None
+        self.subscriber: TopicSubscriber | None = None  # once started
 
     def start(self, feed: Feed) -> None:
         ros_args = self._options.ros_args
@@ -133,7 +133,7 @@ class RosSource:
         declare_settings(self.api, self.node, dict(self._options.parameters))
         # state streams (odometry, IMU, scan, ...) are taken at the sample tick: no
         # Python callback for each of their messages
-        self._subscriber = subscribe_topics(
+        self.subscriber = subscribe_topics(
             self.api,
             self.node,
             wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
@@ -153,8 +153,8 @@ class RosSource:
         return rosidl_field_types(msg)
 
     def before_tick(self) -> None:
-        if self._subscriber is not None:
-            self._subscriber.take_latest()
+        if self.subscriber is not None:
+            self.subscriber.take_latest()
 
     def stop(self) -> None:
         if self.node is not None:
@@ -165,4 +165,4 @@ class RosSource:
         return None
 
     def topic_stats(self) -> dict[str, dict[str, Any]]:
-        return self._subscriber.stats() if self._subscriber else {}
+        return self.subscriber.stats() if self.subscriber else {}

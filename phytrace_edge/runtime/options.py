@@ -1,0 +1,182 @@
+"""The settings, turned into each part's plain options: the only module besides
+``runtime/wiring.py`` that reads ``Settings`` (each stage owns its options' defaults).
+
+It imports only the options of the stages, never the stages themselves: ``status``
+reads its queue path and thresholds here and must start fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from phytrace_edge.builder.options import BuilderOptions, Identity
+from phytrace_edge.config import Settings, setting_infos
+from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.sources.base import SourceOptions
+from phytrace_edge.ingest.sources.dds import domain_settings
+from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.runtime.health import Thresholds
+from phytrace_edge.runtime.logs import configure_logging as configure_logs
+from phytrace_edge.ship.options import SendPolicy, claim_lease_s
+
+MIN_STALL_S = 30.0
+
+
+@dataclass(frozen=True)
+class ServiceOptions:
+    """What the service itself needs to know (the rest is in its parts)."""
+
+    input_label: str  # BRIDGE_INPUT as configured
+    source_id: str
+    source_type: str
+    endpoint_host: str
+    sample_rate_hz: float
+    shutdown_grace_s: float
+    stall_after_s: float = MIN_STALL_S  # a worker without progress this long is stuck
+    metrics_host: str = "127.0.0.1"
+    metrics_port: int = 0
+    health_event_interval_s: float = 0.0  # 0: no bridge.health events
+    thresholds: Thresholds | None = None  # what the health events judge by
+
+
+@dataclass(frozen=True)
+class QueueOptions:
+    """How the queue file is opened (``QueueStore.open``'s arguments)."""
+
+    path: Path
+    limits: QueueLimits
+    compression: str
+    sync: str
+    lease_s: float
+
+
+def configure_logging(s: Settings, env: Mapping[str, str]) -> None:
+    """Logging as LOG_LEVEL and LOG_FORMAT say, with the API key masked; ``env`` tells
+    whether stderr is systemd's journal."""
+    configure_logs(s.log_level, s.log_format, [s.phycloud_api_key.reveal()], env)
+
+
+def identity(s: Settings) -> Identity:
+    return Identity(s.source_id, s.source_type, s.fleet_id, s.site_id)
+
+
+def builder_options(s: Settings) -> BuilderOptions:
+    return BuilderOptions(
+        identity(s),
+        s.sample_rate_hz,
+        s.stale_after_s,
+        s.use_sim_time,
+        extra_topics=s.topics_extra,
+        extra_max_array=s.extra_max_array,
+        rosout_min_level=s.rosout_min_level,
+        rosout_burst=s.rosout_burst,
+    )
+
+
+def source_options(
+    s: Settings, env: Mapping[str, str], ros_args: Sequence[str] = (), **simulator: Any
+) -> SourceOptions:
+    """BRIDGE_INPUT and the topic settings; ``env`` is read for ROS 2's DDS variables."""
+    kind, _, bag_path = s.bridge_input.partition(":")
+    domain_id, localhost_only = 0, False
+    if kind == "dds":
+        domain_id, localhost_only = domain_settings(env)
+    return SourceOptions(
+        kind=kind,
+        topics=s.topics,
+        extra_topics={
+            extra.name: (s.extra_topics[extra.name], extra.type_name) for extra in s.topics_extra
+        },
+        qos_overrides=s.topic_qos or {},
+        bag_path=bag_path,
+        replay_rate=s.replay_rate,
+        ros_args=tuple(ros_args),
+        parameters=ros_parameter_values(s) if kind in ("ros", "sim") else {},
+        dds_domain_id=domain_id,
+        dds_localhost_only=localhost_only,
+        dds_cyclonedds_uri=env.get("CYCLONEDDS_URI", "") if kind == "dds" else "",
+        **simulator,
+    )
+
+
+def ros_parameter_values(s: Settings) -> dict[str, tuple[Any, str]]:
+    """Every setting that has a value, as a ROS parameter (name -> (value, its doc
+    line)), for ``ros2 param list/get``; never the API key. A value ROS has no type
+    for (a table, a set) is given as text."""
+    parameters: dict[str, tuple[Any, str]] = {}
+    for info in setting_infos():
+        value = getattr(s, info.key)
+        if info.key == "phycloud_api_key" or value is None or value in ((), frozenset(), {}):
+            continue
+        if not isinstance(value, (bool, int, float, str)):
+            value = str(value)
+        parameters[info.key] = (value, info.doc)
+    return parameters
+
+
+def queue_path(s: Settings) -> Path:
+    """QUEUE_PATH (the CLI's loading fills in its default under the state directory)."""
+    if s.queue_path is None:
+        raise ConfigError("QUEUE_PATH is not set")
+    return Path(s.queue_path)
+
+
+def queue_options(s: Settings) -> QueueOptions:
+    """The queue named by the settings, its claims leased as the send policy needs."""
+    return QueueOptions(
+        path=queue_path(s),
+        limits=QueueLimits(
+            max_bytes=s.queue_max_bytes,
+            max_events=s.queue_max_events,
+            on_full=s.queue_on_full,
+            ttl_s=s.queue_ttl_s,
+        ),
+        compression=s.queue_compression,
+        sync=s.queue_sync,
+        lease_s=claim_lease_s(send_policy(s), s.http_timeout_s),
+    )
+
+
+def send_policy(s: Settings) -> SendPolicy:
+    return SendPolicy(
+        batch_size=s.batch_size,
+        backlog_batch_size=s.backlog_batch_size,
+        requests_in_flight=s.requests_in_flight,
+        live_share=s.live_share,
+        important_first=s.backfill_important_first,
+        batch_max_bytes=s.batch_max_bytes,
+        flush_interval_s=s.flush_interval_s,
+        retry_min_s=s.retry_min_s,
+        retry_max_s=s.retry_max_s,
+        http_compression=s.http_compression,
+        upload_max_bps=s.upload_max_bps,
+    )
+
+
+def health_thresholds(s: Settings) -> Thresholds:
+    return Thresholds(
+        s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
+    )
+
+
+def service_options(s: Settings) -> ServiceOptions:
+    return ServiceOptions(
+        input_label=s.bridge_input,
+        source_id=s.source_id,
+        source_type=s.source_type,
+        endpoint_host=urlsplit(s.phycloud_endpoint).netloc,
+        sample_rate_hz=s.sample_rate_hz,
+        shutdown_grace_s=s.shutdown_grace_s,
+        stall_after_s=max(MIN_STALL_S, 3 * s.http_timeout_s),
+        metrics_host=s.metrics_host,
+        metrics_port=s.metrics_port,
+        # a bag replay is history, not a running robot: no health events of its own
+        health_event_interval_s=0.0
+        if s.bridge_input.startswith("bag:")
+        else (s.health_event_interval_s),
+        thresholds=health_thresholds(s),
+    )
