@@ -6,11 +6,9 @@ queue (durable SQLite WAL) -> ship (batched HTTP to PhyCloud).
 
 from __future__ import annotations
 
-from phytrace_edge._version import __version__
+from typing import Any
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing: starts faster
-if TYPE_CHECKING:
-    from typing import Any
+from phytrace_edge._version import __version__
 
 __all__ = ["__version__", "run_simulation"]
 

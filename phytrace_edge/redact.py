@@ -7,6 +7,8 @@ repr or in JSON, percent-encoded in a URL), so a redaction filter can catch thos
 
 from __future__ import annotations
 
+import json
+
 MASK = "***"
 
 
@@ -41,7 +43,6 @@ class Secret:
 def leak_forms(secret: str) -> list[str]:
     """Every form of ``secret`` worth masking, longest first: as is, as Python's repr
     and JSON escape it, and percent-encoded."""
-    import json  # here: every command imports Secret, few ever redact
     from urllib.parse import quote
 
     if not secret:

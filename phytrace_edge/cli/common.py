@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import json
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any, NoReturn
 
 from phytrace_edge.config import setting_infos
+from phytrace_edge.config.parsers import positive_float
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import format_bytes
 
@@ -99,15 +102,11 @@ def error(message: str) -> None:
 
 def print_json(document: Any) -> None:
     """``document`` as indented JSON (stdlib json: ``status`` starts faster without orjson)."""
-    import json
-
     sys.stdout.write(json.dumps(document, indent=2, ensure_ascii=False) + "\n")
 
 
 def add_timeout_flag(parser: argparse.ArgumentParser) -> None:
     """``--timeout S`` of the commands that send (``drain``, ``import``)."""
-    from phytrace_edge.config.parsers import positive_float
-
     parser.add_argument(
         "--timeout",
         type=checked(positive_float(10**7), "seconds"),
@@ -118,7 +117,5 @@ def add_timeout_flag(parser: argparse.ArgumentParser) -> None:
 def stop_on_signals(stop: Any) -> None:
     """SIGINT and SIGTERM set ``stop`` (a threading.Event): the sender finishes the
     request on the wire and keeps the rest queued."""
-    import signal
-
     signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
     signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())

@@ -9,6 +9,7 @@ from phytrace_edge.cli.common import checked
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.config.parsers import int_between, non_negative_float, path_value
 from phytrace_edge.errors import EXIT_OK, ConfigError
+from phytrace_edge.udm.event import format_timestamp
 
 ID = int_between(1, 2**63 - 1)
 LIMIT = int_between(1, 10**6)
@@ -41,8 +42,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Inspect, export, requeue or purge events PhyCloud rejected for good."""
-    from phytrace_edge.udm.event import format_timestamp
-
     ids = args.ids or None
     if args.action == "purge" and ids is None and args.older_than_days is None and not args.all:
         raise ConfigError("purge needs ids, --older-than-days or --all")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from phytrace_edge.cli.common import checked, error
 from phytrace_edge.config import LoadedSettings
@@ -35,8 +36,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
-    from pathlib import Path
-
     from tqdm import tqdm
 
     from phytrace_edge.runtime import wiring

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -33,8 +34,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Each file in turn: read it into a staging queue, then send that queue empty."""
-    import tempfile
-
     from phytrace_edge.runtime import wiring
 
     deadline = None if args.timeout is None else time.monotonic() + args.timeout

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import os
+import signal
+import threading
 import time
 
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, StageFailedError
+from phytrace_edge.runtime.sd_notify import SystemdNotifier
 
 DUPLICATE_SIGNAL_S = 1.0  # a second signal sooner is the first one delivered twice
 
@@ -29,12 +33,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Run the bridge until SIGTERM or SIGINT; a second signal exits at once, unless it
     follows the first within DUPLICATE_SIGNAL_S: a Ctrl-C in the terminal of ``ros2
     launch`` reaches the bridge itself and again as launch forwards it."""
-    import logging
-    import signal
-    import threading
-
-    from phytrace_edge.runtime import watchdog, wiring
-    from phytrace_edge.runtime.sd_notify import SystemdNotifier
+    from phytrace_edge.runtime import watchdog, wiring  # the whole bridge: only for `run`
 
     log = logging.getLogger("phytrace_edge")
     stop = threading.Event()

@@ -6,12 +6,9 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Any
 
 from phytrace_edge.ingest.topics import EXTRA_MODES, TOPIC_NAMES, ExtraTopic
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
 
 MAX_EXTRA_TOPICS = 64
 MAX_RATE_HZ = 1000.0

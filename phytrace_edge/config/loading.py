@@ -13,26 +13,23 @@ import os
 import stat
 import sys
 from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 from phytrace_edge.config.settings import Setting, Settings, setting_infos
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.units import format_bytes
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
-
 CONFIG_FILE_MAX_BYTES = 1024 * 1024
 SHOWN_MAX_CHARS = 60
 
 
+@dataclass(frozen=True)
 class LoadedSettings:
     """Settings plus where each value came from (``default``, ``env NAME``, ...)."""
 
-    __slots__ = ("origins", "settings")
-
-    def __init__(self, settings: Settings, origins: dict[str, str]) -> None:
-        self.settings, self.origins = settings, origins
+    settings: Settings
+    origins: dict[str, str]
 
 
 def _shown(info: Setting, raw: Any) -> str:

@@ -9,21 +9,19 @@ bounded before they are computed, and nothing here reads more than a little of a
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import os
 import re
 import stat
 from collections.abc import Callable
+from typing import Any
+from urllib.parse import urlsplit
 
+from phytrace_edge.ingest.qos import QosChoice
 from phytrace_edge.ingest.topics import TOPIC_NAMES
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import format_bytes
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
-
-    from phytrace_edge.ingest.qos import QosChoice
 
 KNOWN_TOPICS = TOPIC_NAMES
 MAX_TEXT_CHARS = 4096  # no setting needs more; a longer value is a mistake
@@ -166,8 +164,6 @@ def byte_size(lower: int, upper: int = 2**50) -> Callable[[Any], int]:
 
 def http_url(raw: Any) -> str:
     """An http(s) URL with a valid host and port; the path is kept, a trailing / not."""
-    from urllib.parse import urlsplit  # only when the endpoint is set (status starts fast)
-
     allowed = "an http:// or https:// URL with a host, like https://api.example.com/v1"
     try:
         value = _text(raw).rstrip("/")
@@ -185,8 +181,6 @@ def http_url(raw: Any) -> str:
 
 def _valid_host(host: str) -> bool:
     if ":" in host:  # an IPv6 literal (urlsplit took the brackets away)
-        import ipaddress
-
         try:
             ipaddress.IPv6Address(host)
         except ValueError:
@@ -278,8 +272,6 @@ def topic_remap(raw: Any) -> dict[str, str]:
 
 def topic_qos(raw: Any) -> dict[str, QosChoice]:
     """``/scan=best_effort,/goal_pose=reliable:transient_local`` -> per-topic QoS."""
-    from phytrace_edge.ingest.qos import QosChoice
-
     allowed = (
         "topic=reliability[:durability] pairs for known topics, reliability "
         "reliable or best_effort, durability volatile or transient_local"

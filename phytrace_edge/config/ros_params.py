@@ -9,12 +9,11 @@ node. PyYAML is imported only for a params file (it comes with ROS 2's Python).
 from __future__ import annotations
 
 import itertools
+from typing import Any
+
+from phytrace_edge.errors import ConfigError
 
 NODE_NAME = "phytrace_edge"  # the bridge's node (ingest.sources.base.NODE_NAME)
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
 
 
 def ros_parameters(ros_args: list[str]) -> dict[str, Any]:
@@ -34,8 +33,6 @@ def ros_parameters(ros_args: list[str]) -> dict[str, Any]:
 
 def params_file(path: str) -> dict[str, Any]:
     """The parameters an rcl params file gives the bridge's node."""
-    from phytrace_edge.errors import ConfigError
-
     try:
         import yaml
     except ImportError:

@@ -7,13 +7,14 @@ form (``--sample-rate-hz``). The reference guide's aliases (``ROBOT_ID``,
 stage's settings are the stage's own constants (its ``defaults.py``); the rest
 (logging, health, metrics, shutdown) are the runtime's and live here.
 
-This package is on the start-up path of every command: stdlib only, and no
-``dataclasses``, ``typing`` or ``pathlib`` at import (tests/unit/test_startup.py).
+This package is on the start-up path of every command: it imports nothing outside the
+standard library (tests/unit/test_startup.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from phytrace_edge.builder.defaults import (
     DEFAULT_ROSOUT_BURST,
@@ -45,17 +46,12 @@ from phytrace_edge.config.parsers import (
     topic_set,
 )
 from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY, DEFAULT_REPLAY_RATE
+from phytrace_edge.ingest.qos import QosChoice
+from phytrace_edge.ingest.topics import ExtraTopic
 from phytrace_edge.queue import defaults as queue
 from phytrace_edge.redact import Secret
 from phytrace_edge.ship import defaults as ship
 from phytrace_edge.units import KIB, MIB
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
-
-    from phytrace_edge.ingest.qos import QosChoice
-    from phytrace_edge.ingest.topics import ExtraTopic
 
 SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
 DEFAULT_SHUTDOWN_GRACE_S = 5.0
@@ -98,10 +94,9 @@ def setting(default: Any, parse: Callable[[Any], Any], doc: str, *aliases: str) 
 class Settings:
     """The effective configuration, validated once at start; read-only.
 
-    Each attribute is a ``Setting``: one name, one default, one rule, one doc line. A
-    plain class rather than a dataclass, because every command (the health check's
-    ``status`` too) loads it at start, and ``dataclasses`` alone costs more than the
-    rest of ``status`` (docs/benchmarks.md).
+    Each attribute is a ``Setting`` (a descriptor): its name, default, rule and doc
+    line in one declaration, which ``setting_infos`` lists for the docs, ``config``
+    and the ROS parameters.
     """
 
     __slots__ = ("_values",)

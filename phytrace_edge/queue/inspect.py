@@ -6,7 +6,7 @@ service runs, or after it stopped); ``QueueStore.stats()`` reads the same throug
 store's own connection. Both go through ``stats_from``, so they cannot disagree.
 
 On the start-up path of ``status`` (the container's health check runs it every 30 s):
-stdlib only, and no ``dataclasses``, ``typing``, ``logging`` or ``pathlib`` at import.
+it imports nothing outside the standard library.
 """
 
 from __future__ import annotations
@@ -15,68 +15,43 @@ import json
 import os
 import sqlite3
 import stat
+from dataclasses import dataclass, field
+from typing import Any
 
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.sqlite_errors import queue_error
-
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
 
 READ_TIMEOUT_S = 5.0
 DAMAGED_SUFFIX = ".damaged"  # written by ``recovery`` when a check finds damage
 
 
+@dataclass(frozen=True)
 class ServiceState:
     """The running service's last heartbeat (``service_state.py`` writes it)."""
 
-    __slots__ = ("document", "heartbeat_at", "running")
+    heartbeat_at: float
+    running: bool
+    document: dict[str, Any]
 
-    def __init__(self, heartbeat_at: float, running: bool, document: dict[str, Any]) -> None:
-        self.heartbeat_at, self.running, self.document = heartbeat_at, running, document
 
-
+@dataclass
 class QueueStats:
     """The queue's counters and oldest/newest events, its files' size, and the service's
     last heartbeat (None when no service ever ran on this queue). ``extra_drops`` are
     drops counted in memory and not yet written (the disk was full)."""
 
-    __slots__ = (
-        "counters",
-        "damaged",
-        "extra_drops",
-        "file_bytes",
-        "leased",
-        "max_bytes",
-        "newest_queued_at",
-        "oldest_queued_at",
-        "path",
-        "quarantined",
-        "resolution",
-        "service",
-    )
-
-    def __init__(
-        self,
-        path: str,
-        counters: dict[str, int],
-        oldest_queued_at: float | None,
-        newest_queued_at: float | None,
-        file_bytes: int,
-        quarantined: str | None,
-        leased: int,
-        service: ServiceState | None = None,
-        max_bytes: int = 0,
-        extra_drops: dict[str, int] | None = None,
-        damaged: str | None = None,
-        resolution: list[dict[str, Any]] | None = None,
-    ) -> None:
-        self.path, self.counters, self.file_bytes = path, counters, file_bytes
-        self.oldest_queued_at, self.newest_queued_at = oldest_queued_at, newest_queued_at
-        self.quarantined, self.leased, self.service = quarantined, leased, service
-        self.max_bytes, self.extra_drops = max_bytes, extra_drops or {}
-        self.damaged = damaged
-        self.resolution = resolution or []
+    path: str
+    counters: dict[str, int]
+    oldest_queued_at: float | None
+    newest_queued_at: float | None
+    file_bytes: int
+    quarantined: str | None
+    leased: int
+    service: ServiceState | None = None
+    max_bytes: int = 0
+    extra_drops: dict[str, int] = field(default_factory=dict)
+    damaged: str | None = None
+    resolution: list[dict[str, Any]] = field(default_factory=list)
 
     def add_deferred(self, deferred: dict[str, int]) -> None:
         """Add the drops counted in memory and not yet written (the disk was full)."""

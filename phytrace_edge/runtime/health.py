@@ -6,35 +6,27 @@ not be kept alive; PhyCloud refuses the API key; the queue is above
 QUEUE_WARN_FRACTION of its cap; or events are waiting and nothing was sent for
 HEALTH_NO_PROGRESS_S.
 
-On the start-up path of ``status``: stdlib only at import.
+On the start-up path of ``status``: nothing outside the standard library.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
+from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.udm.event import format_timestamp
 
-TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing
-if TYPE_CHECKING:
-    from typing import Any
 
-    from phytrace_edge.queue.inspect import QueueStats
-
-
+@dataclass(frozen=True)
 class Thresholds:
     """HEALTH_STALE_S, HEALTH_NO_PROGRESS_S, QUEUE_WARN_FRACTION and QUEUE_MAX_BYTES."""
 
-    __slots__ = ("health_stale_s", "no_progress_s", "queue_max_bytes", "queue_warn_fraction")
-
-    def __init__(
-        self,
-        health_stale_s: float,
-        no_progress_s: float,
-        queue_warn_fraction: float,
-        queue_max_bytes: int,
-    ) -> None:
-        self.health_stale_s, self.no_progress_s = health_stale_s, no_progress_s
-        self.queue_warn_fraction, self.queue_max_bytes = queue_warn_fraction, queue_max_bytes
+    health_stale_s: float
+    no_progress_s: float
+    queue_warn_fraction: float
+    queue_max_bytes: int
 
 
 def _iso(unix_s: float | None) -> str | None:

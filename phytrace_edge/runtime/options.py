@@ -17,7 +17,7 @@ from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.config import Settings, setting_infos
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.sources.base import SourceOptions
-from phytrace_edge.ingest.sources.dds import domain_settings
+from phytrace_edge.ingest.sources.dds_env import domain_settings
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.runtime.health import Thresholds
 from phytrace_edge.runtime.logs import configure_logging as configure_logs

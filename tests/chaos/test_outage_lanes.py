@@ -26,7 +26,8 @@ import httpx
 from phytrace_edge.builder.builder import Built
 from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime.wiring import build_service, queue_path
+from phytrace_edge.runtime.options import queue_path
+from phytrace_edge.runtime.wiring import build_service
 from tests.processes import wait_for
 
 RATE_HZ = 50

@@ -11,7 +11,8 @@ from __future__ import annotations
 import random
 import time
 
-from phytrace_edge.runtime.wiring import http_transport, open_queue, send_policy
+from phytrace_edge.runtime.options import send_policy
+from phytrace_edge.runtime.wiring import http_transport, open_queue
 from phytrace_edge.ship.sender import Sender
 from tests.processes import wait_for
 

@@ -66,17 +66,6 @@ def domain_config(localhost_only: bool, cyclonedds_uri: str = "") -> str:
     return f"{cyclonedds_uri},{ours}" if cyclonedds_uri.strip() else ours
 
 
-def domain_settings(env: Mapping[str, str]) -> tuple[int, bool]:
-    """(domain id, localhost only) from ROS 2's environment variables."""
-    raw = (env.get("ROS_DOMAIN_ID") or "0").strip()
-    if not raw.isascii() or not raw.isdigit() or int(raw) > 232:
-        raise ConfigError(f"ROS_DOMAIN_ID={raw!r}: must be a whole number from 0 to 232")
-    localhost = env.get("ROS_LOCALHOST_ONLY") == "1" or (
-        env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST"
-    )
-    return int(raw), localhost
-
-
 def dds_topic_name(ros_topic: str) -> str:
     """ROS 2's DDS name of a topic: ``/odom`` -> ``rt/odom``."""
     return "rt" + ros_topic
