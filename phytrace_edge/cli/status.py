@@ -12,6 +12,7 @@ from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime import options
+from phytrace_edge.runtime.documents import StatusReport
 from phytrace_edge.runtime.health import exit_code, report
 from phytrace_edge.units import format_bytes
 
@@ -63,7 +64,7 @@ def format_age(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 60 else f"{seconds:.0f} s"
 
 
-def render_status(d: dict[str, Any]) -> str:
+def render_status(d: StatusReport) -> str:
     """The status document as a table for people."""
     state = "HEALTHY" if d["healthy"] else ("UNHEALTHY" if d["problems"] else "NOT RUNNING")
     service, queue = d["service"], d["queue"]

@@ -5,6 +5,7 @@ last saw, whether or not it runs now."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import orjson
@@ -12,7 +13,9 @@ import orjson
 from phytrace_edge.queue.database import Database
 
 
-def write_service_state(db: Database, document: dict[str, Any], running: bool, now: float) -> None:
+def write_service_state(
+    db: Database, document: Mapping[str, Any], running: bool, now: float
+) -> None:
     row = (now, int(running), orjson.dumps(document).decode())
     db.write(
         lambda cursor: cursor.execute(

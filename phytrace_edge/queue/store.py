@@ -26,7 +26,7 @@ import itertools
 import logging
 import sqlite3
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -368,7 +368,7 @@ class QueueStore:
 
     # ------------------------------------------------------------------ state
 
-    def write_service_state(self, document: dict[str, Any], running: bool) -> None:
+    def write_service_state(self, document: Mapping[str, Any], running: bool) -> None:
         """Record the running service's figures for ``status`` (another process)."""
         write_service_state(self._db, document, running, self._clock())
 

@@ -12,10 +12,17 @@ On the start-up path of ``status``: nothing outside the standard library.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.runtime.documents import (
+    Lanes,
+    SenderFigures,
+    ServiceDocument,
+    StageFigures,
+    StatusReport,
+)
 from phytrace_edge.udm.event import format_timestamp
 
 
@@ -33,18 +40,18 @@ def _iso(unix_s: float | None) -> str | None:
     return None if unix_s is None else format_timestamp(unix_s)
 
 
-def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
+def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
     """The status document (docs/operations.md lists its keys) with ``healthy`` and
     ``problems``."""
     state = stats.service
-    service = state.document if state else {}
-    sender = service.get("sender", {})
+    service = cast(ServiceDocument, state.document if state else {})
+    sender: SenderFigures = service.get("sender", {})
     heartbeat_age = None if state is None else round(now - state.heartbeat_at, 1)
     oldest_age = None if stats.oldest_queued_at is None else round(now - stats.oldest_queued_at, 1)
     last_success = sender.get("last_success_at")
     claims_to_run = state is not None and state.running
     running = claims_to_run and heartbeat_age is not None and heartbeat_age <= limits.health_stale_s
-    stages = service.get("stages", {})
+    stages: dict[str, StageFigures] = service.get("stages", {})
 
     problems = []
     if claims_to_run and not running:
@@ -125,7 +132,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> dict[str, Any]:
     }
 
 
-def _lanes(sender: dict[str, Any], oldest_age: float | None, now: float) -> dict[str, Any]:
+def _lanes(sender: SenderFigures, oldest_age: float | None, now: float) -> Lanes:
     """The two lanes of the drain: what each delivered, how far behind the present the
     newest event PhyCloud holds is (``live_lag_s``), and how old the backfill's
     oldest waiting event is (``backlog_oldest_age_s``)."""
@@ -156,7 +163,7 @@ def _topics_now(
     return now
 
 
-def _drops(queue_drops: dict[str, int], service: dict[str, Any]) -> dict[str, int]:
+def _drops(queue_drops: dict[str, int], service: ServiceDocument) -> dict[str, int]:
     """Drops by reason: the queue's, and the service's hand-off to it (the disk stalled
     so long that the writer fell HANDOFF_MAX_EVENTS behind)."""
     drops = dict(queue_drops)
@@ -172,7 +179,7 @@ def stalled(progress_age_s: float | None, stall_after_s: float) -> bool:
     return progress_age_s is not None and progress_age_s > stall_after_s
 
 
-def _stage_problems(stages: dict[str, Any], health_stale_s: float) -> list[str]:
+def _stage_problems(stages: dict[str, StageFigures], health_stale_s: float) -> list[str]:
     problems = []
     for name, stage in stages.items():
         age = stage.get("progress_age_s")
@@ -183,7 +190,7 @@ def _stage_problems(stages: dict[str, Any], health_stale_s: float) -> list[str]:
     return problems
 
 
-def exit_code(document: dict[str, Any]) -> int:
+def exit_code(document: StatusReport) -> int:
     if document["problems"]:
         return EXIT_UNHEALTHY
     return EXIT_OK if document["running"] else EXIT_NOT_RUNNING

@@ -16,6 +16,7 @@ from phytrace_edge.builder.builder import Built
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.ingest.convert import present
 from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.runtime.documents import StatusReport
 from phytrace_edge.runtime.health import Thresholds, report
 
 EVENT_TYPE_HEALTH = "bridge.health"
@@ -50,7 +51,7 @@ class HealthSchedule:
 
 def health_event(
     identity: Mapping[str, str],
-    report: Mapping[str, Any],
+    report: StatusReport,
     trigger: str,
     uptime_s: float,
     captured_at_s: float,

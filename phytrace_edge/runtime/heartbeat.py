@@ -8,11 +8,12 @@ import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 from phytrace_edge._version import __version__
 from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime.documents import SenderFigures, ServiceDocument, StageFigures
 from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
@@ -79,23 +80,27 @@ def topic_report(
 
 
 def service_document(
-    identity: Mapping[str, Any],
-    sender: Mapping[str, Any],
-    topics: Mapping[str, Any],
-    stages: Mapping[str, Any],
-    extra: Mapping[str, Any],
+    options: ServiceOptions,
+    sender: SenderFigures,
+    topics: dict[str, dict[str, Any]],
+    stages: dict[str, StageFigures],
+    events_built: int,
+    writer_dropped: int,
     started_at: float,
-) -> dict[str, Any]:
+) -> ServiceDocument:
     """What the heartbeat row holds (``status`` reads it)."""
     return {
         "pid": os.getpid(),
         "version": __version__,
         "started_at": started_at,
-        **identity,
-        "sender": dict(sender),
-        "topics": dict(topics),
-        "stages": dict(stages),
-        **extra,
+        "input": options.input_label,
+        "source_id": options.source_id,
+        "endpoint_host": options.endpoint_host,
+        "sender": sender,
+        "topics": topics,
+        "stages": stages,
+        "events_built": events_built,
+        "writer_dropped": writer_dropped,
     }
 
 
@@ -131,7 +136,7 @@ class Heartbeat:
             rates,
         )
 
-    def stages(self) -> dict[str, dict[str, Any]]:
+    def stages(self) -> dict[str, StageFigures]:
         sup = self.supervisor
         ages = sup.progress_ages()
         return {
@@ -163,16 +168,14 @@ class Heartbeat:
             **{f"topic:{t}": n for t, n in self.pipeline.dispatcher.received.items()},
         }
         rates = self._rates.update(counters, time.time())
-        o = self.options
+        sender = cast(SenderFigures, self.sender.stats.as_dict())
         document = service_document(
-            {"input": o.input_label, "source_id": o.source_id, "endpoint_host": o.endpoint_host},
-            {**self.sender.stats.as_dict(), "send_rate_eps": rates.get("send", 0.0)},
+            self.options,
+            {**sender, "send_rate_eps": rates.get("send", 0.0)},
             self.topics(rates),
             self.stages(),
-            {
-                "events_built": self.outlet.events_built,
-                "writer_dropped": self.outlet.writer.events_dropped,
-            },
+            self.outlet.events_built,
+            self.outlet.writer.events_dropped,
             self.started_at,
         )
         self.store.write_service_state(document, running)

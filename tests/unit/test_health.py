@@ -3,8 +3,13 @@ heartbeat (runtime/health.py), on known inputs."""
 
 from __future__ import annotations
 
+from typing import get_type_hints
+
 from phytrace_edge.queue.inspect import QueueStats, ServiceState
+from phytrace_edge.runtime.documents import Lanes, QueueSection, ServiceDocument, StatusReport
 from phytrace_edge.runtime.health import Thresholds, exit_code, report
+from phytrace_edge.runtime.heartbeat import service_document
+from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.units import GIB
 
 NOW = 1_800_000_000.0
@@ -100,3 +105,18 @@ def test_status_and_the_watchdog_judge_a_stage_by_the_same_bound() -> None:
     doc = report(stats(stages={"sender": stage(45.0)}), patient, NOW)
     assert doc["problems"] == ["stage sender has made no progress for 45 s"]
     assert stalled(45.0, 30.0) and not stalled(30.0, 30.0) and not stalled(None, 30.0)
+
+
+def test_the_status_report_has_exactly_the_declared_keys() -> None:
+    """StatusReport (runtime/documents.py) is what status --json prints, key for key."""
+    document = report(stats(sender={"last_success_at": NOW - 1}), LIMITS, NOW)
+    assert set(document) == set(get_type_hints(StatusReport))
+    assert set(document["queue"]) == set(get_type_hints(QueueSection))
+    assert set(document["lanes"]) == set(get_type_hints(Lanes))
+
+
+def test_the_heartbeat_writes_only_declared_keys() -> None:
+    options = ServiceOptions("sim", "bot", "amr", "127.0.0.1:9", 5.0, 5.0)
+    document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW)
+    assert set(document) == set(get_type_hints(ServiceDocument))
+    assert report(stats(**document), LIMITS, NOW)["events_built"] == 7
