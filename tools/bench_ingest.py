@@ -205,7 +205,8 @@ def publish_load(stop: threading.Event, rates: dict[str, int] = RATES_HZ) -> Non
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
+    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config
+    from phytrace_edge.ingest.sources.dds_env import domain_settings
 
     domain_id, localhost = domain_settings(os.environ)
     _domain = Domain(domain_id, domain_config(localhost_only=True)) if localhost else None
@@ -237,7 +238,8 @@ def bare_reader(stop: threading.Event) -> None:
     from cyclonedds.sub import DataReader
     from cyclonedds.topic import Topic
 
-    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
+    from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config
+    from phytrace_edge.ingest.sources.dds_env import domain_settings
 
     domain_id, localhost = domain_settings(os.environ)
     _domain = Domain(domain_id, domain_config(localhost_only=True)) if localhost else None

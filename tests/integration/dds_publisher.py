@@ -21,7 +21,8 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from phytrace_edge.ingest.sources import dds_types as t
-from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config, domain_settings
+from phytrace_edge.ingest.sources.dds import dds_topic_name, domain_config
+from phytrace_edge.ingest.sources.dds_env import domain_settings
 from tests.ros.known import KNOWN
 
 BEST_EFFORT = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5))

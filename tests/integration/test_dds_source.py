@@ -21,7 +21,8 @@ from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.config import load_settings
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.sources import dds_types
-from phytrace_edge.ingest.sources.dds import DdsSource, domain_config, domain_settings
+from phytrace_edge.ingest.sources.dds import DdsSource, domain_config
+from phytrace_edge.ingest.sources.dds_env import domain_settings
 from phytrace_edge.runtime import options, wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
