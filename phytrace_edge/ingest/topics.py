@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 from phytrace_edge.ingest import handlers, rosout, status
 from phytrace_edge.ingest.readings import Reading
@@ -34,16 +34,7 @@ Domain = Literal[
     "actuators",
     "payload",
 ]
-DOMAINS: tuple[Domain, ...] = (
-    "location",
-    "motion",
-    "power",
-    "operational",
-    "navigation",
-    "perception",
-    "actuators",
-    "payload",
-)
+DOMAINS: tuple[Domain, ...] = get_args(Domain)  # in the order of an event's keys
 Handler = Callable[[Any], Reading]
 
 

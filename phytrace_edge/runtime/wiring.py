@@ -47,6 +47,7 @@ from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
 from phytrace_edge.runtime.service import BridgeService
 from phytrace_edge.runtime.supervisor import Supervisor
 from phytrace_edge.runtime.writer import QueueWriter
+from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import HttpTransport, Transport
 
@@ -97,12 +98,8 @@ class Shipping:
 @contextmanager
 def shipping(s: Settings) -> Iterator[Shipping]:
     """The robot's queue and its sender, as ``run`` would send it (``drain``)."""
-    with open_queue(s) as store:
-        parts = Shipping(store, Sender(store, http_transport(s), options.send_policy(s)))
-        try:
-            yield parts
-        finally:
-            parts.sender.transport.close()
+    with open_queue(s) as store, _sending(s, store, options.send_policy(s)) as parts:
+        yield parts
 
 
 @contextmanager
@@ -110,12 +107,20 @@ def staging(s: Settings, path: Path) -> Iterator[Shipping]:
     """A staging queue at ``path`` and a sender that sends it strictly oldest first
     (``import``: the staging queue only feeds the sender)."""
     policy = dataclasses.replace(options.send_policy(s), live_share=0.0)
-    with QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store:
-        parts = Shipping(store, Sender(store, http_transport(s), policy))
-        try:
-            yield parts
-        finally:
-            parts.sender.transport.close()
+    with (
+        QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store,
+        _sending(s, store, policy) as parts,
+    ):
+        yield parts
+
+
+@contextmanager
+def _sending(s: Settings, store: QueueStore, policy: SendPolicy) -> Iterator[Shipping]:
+    sender = Sender(store, http_transport(s), policy)
+    try:
+        yield Shipping(store, sender)
+    finally:
+        sender.transport.close()
 
 
 def build_service(

@@ -4,6 +4,7 @@ message classes of real rclpy or the mock, which share rosidl's field types."""
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 
@@ -13,16 +14,17 @@ def message_class(type_name: str) -> type:
     return getattr(importlib.import_module(f"{package}.msg"), name)  # type: ignore[no-any-return]
 
 
-def fill(msg: Any, fields: dict[str, Any]) -> Any:
+def fill(msg: Any, fields: dict[str, Any], classes: Callable[[str], type] = message_class) -> Any:
     """Set ``fields`` on ``msg`` (rosidl field types decide: a ``byte`` is one byte, a
-    sequence of messages is built element by element); returns ``msg``."""
+    sequence of messages is built element by element, its class found by ``classes``);
+    returns ``msg``."""
     types = msg.get_fields_and_field_types()
     for name, value in fields.items():
         kind = types[name]
         if isinstance(value, dict):
-            fill(getattr(msg, name), value)
+            fill(getattr(msg, name), value, classes)
         elif kind.startswith("sequence<") and "/" in kind:
-            element = message_class(kind[len("sequence<") : -1])
+            element = classes(kind[len("sequence<") : -1])
             setattr(msg, name, [fill(element(), item) for item in value])
         elif kind == "octet":
             setattr(msg, name, bytes([value]))

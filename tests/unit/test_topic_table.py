@@ -17,6 +17,7 @@ from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.ingest import readings
 from phytrace_edge.ingest.topics import DOMAINS, TOPIC_BY_NAME, TOPICS
 from phytrace_edge.sim.mock_ros.messages import message_type
+from tests.ros.fields import fill
 from tests.ros.known import KNOWN
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,26 +39,15 @@ def undeclared_keys(value: Any, declared: Any, at: str = "") -> list[str]:
     return found
 
 
+def mock_class(type_name: str) -> type:
+    """``sensor_msgs/msg/Imu`` or ``sensor_msgs/Imu`` -> the mock's class."""
+    package, *_, name = type_name.split("/")
+    return message_type(f"{package}/msg/{name}")
+
+
 def known_message(topic: str) -> Any:
     type_name, _, fields = KNOWN[topic]
-    return fill(message_type(type_name)(), fields)
-
-
-def fill(msg: Any, fields: dict[str, Any]) -> Any:
-    types = msg.get_fields_and_field_types()
-    for name, value in fields.items():
-        kind = types[name]
-        if isinstance(value, dict):
-            fill(getattr(msg, name), value)
-        elif kind.startswith("sequence<") and "/" in kind:
-            package, kind_name = kind[len("sequence<") : -1].split("/")
-            element = message_type(f"{package}/msg/{kind_name}")
-            setattr(msg, name, [fill(element(), item) for item in value])
-        elif kind == "octet":
-            setattr(msg, name, bytes([value]))
-        else:
-            setattr(msg, name, value)
-    return msg
+    return fill(mock_class(type_name)(), fields, mock_class)
 
 
 def known_readings() -> dict[str, Any]:
