@@ -9,7 +9,7 @@ from typing import Any
 from phytrace_edge.config import Settings, load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime import options, wiring
-from phytrace_edge.runtime.health import report
+from phytrace_edge.runtime.health import report, thresholds
 
 
 def bridge_settings(tmp_path: Path, endpoint: str, **extra: str) -> Settings:
@@ -48,7 +48,7 @@ class InProcessBridge:
         self.service.heartbeat.write(running=True)
         now = self.service.store.now()
         stats = read_stats(options.queue_path(self.settings), now)
-        return report(stats, options.health_thresholds(self.settings), now)
+        return report(stats, thresholds(self.settings), now)
 
     def stop(self) -> None:
         """As at SIGTERM; once."""

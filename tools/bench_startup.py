@@ -1,8 +1,8 @@
 """Start-up cost of the commands an operator and a health check run, side by side with
 the floor: a bare ``python -c pass`` from the same virtual environment.
 
-    python3 tools/bench_startup.py                 # 100k-event queue, 15 runs each
-    python3 tools/bench_startup.py --events 10000 --runs 5
+    .venv/bin/python tools/bench_startup.py          # 100k-event queue, 15 runs each
+    .venv/bin/python tools/bench_startup.py --events 10000 --runs 5
 
 Each command runs in a fresh process, interleaved with the others; the table shows the
 median wall time and the peak RSS (from wait4) and their ratio to the floor. The

@@ -11,9 +11,8 @@ from phytrace_edge.cli.common import error, print_json
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING
 from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime import options
 from phytrace_edge.runtime.documents import StatusReport
-from phytrace_edge.runtime.health import exit_code, report
+from phytrace_edge.runtime.health import exit_code, report, thresholds
 from phytrace_edge.units import format_bytes
 
 LOGS = False  # status prints, it does not log: the health check starts it every 30 s
@@ -29,13 +28,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running."""
-    path = options.queue_path(loaded.settings)
+    path = loaded.settings.queue_path  # loading fills in its default
     now = time.time()
     stats = read_stats(str(path), now)
     if stats is None:
         error(f"no queue at {path}: the bridge never ran with this QUEUE_PATH")
         return EXIT_NOT_RUNNING
-    document = report(stats, options.health_thresholds(loaded.settings), now)
+    document = report(stats, thresholds(loaded.settings), now)
     if args.json:
         print_json(document)
     elif not args.quiet:

@@ -7,14 +7,11 @@ reads the result. An empty environment variable counts as unset, because compose
 files pass ``${FLEET_ID}`` through as an empty string when the operator did not set it.
 """
 
-from __future__ import annotations
-
 import os
 import stat
 import sys
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from phytrace_edge.config.settings import Setting, Settings, setting_infos
 from phytrace_edge.errors import ConfigError
@@ -24,8 +21,7 @@ CONFIG_FILE_MAX_BYTES = 1024 * 1024
 SHOWN_MAX_CHARS = 60
 
 
-@dataclass(frozen=True)
-class LoadedSettings:
+class LoadedSettings(NamedTuple):
     """Settings plus where each value came from (``default``, ``env NAME``, ...)."""
 
     settings: Settings

@@ -9,7 +9,6 @@ bounded before they are computed, and nothing here reads more than a little of a
 
 from __future__ import annotations
 
-import ipaddress
 import math
 import os
 import re
@@ -181,6 +180,8 @@ def http_url(raw: Any) -> str:
 
 def _valid_host(host: str) -> bool:
     if ":" in host:  # an IPv6 literal (urlsplit took the brackets away)
+        import ipaddress  # here, not at the top: a millisecond of every command's start
+
         try:
             ipaddress.IPv6Address(host)
         except ValueError:

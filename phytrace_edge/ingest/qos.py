@@ -1,12 +1,9 @@
 """Which QoS a subscription asks for, decided from what the publishers offer. Pure."""
 
-from __future__ import annotations
-
-from dataclasses import dataclass
+from typing import NamedTuple
 
 
-@dataclass(frozen=True)
-class QosChoice:
+class QosChoice(NamedTuple):
     """What a subscription asks for: the part of QoS that decides matching."""
 
     reliable: bool

@@ -15,11 +15,8 @@ Two flags say how a topic's messages are treated:
   ``STALE_AFTER_S`` and then leaves the event.
 """
 
-from __future__ import annotations
-
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any, Literal, get_args
+from typing import Any, Literal, NamedTuple, get_args
 
 from phytrace_edge.ingest import handlers, rosout, status
 from phytrace_edge.ingest.readings import Reading
@@ -38,8 +35,7 @@ DOMAINS: tuple[Domain, ...] = get_args(Domain)  # in the order of an event's key
 Handler = Callable[[Any], Reading]
 
 
-@dataclass(frozen=True)
-class TopicSpec:
+class TopicSpec(NamedTuple):
     """One row of the topic table: the topic, its ROS 2 type, the handler that reads
     its messages, the UDM domains its readings feed (each domain's ``sources`` lists
     the topics that feed it), and how it is heard (``every_message``: reliable and
@@ -121,8 +117,7 @@ TOPIC_NAMES = tuple(TOPIC_BY_NAME)
 EXTRA_MODES = ("sample", "on_change")
 
 
-@dataclass(frozen=True)
-class ExtraTopic:
+class ExtraTopic(NamedTuple):
     """One entry of ``TOPICS_EXTRA``: a topic outside the table, shipped as
     ``telemetry.topic`` events (docs/configuration.md, "Any other topic").
 

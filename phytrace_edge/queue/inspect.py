@@ -9,14 +9,11 @@ On the start-up path of ``status`` (the container's health check runs it every 3
 it imports nothing outside the standard library.
 """
 
-from __future__ import annotations
-
 import json
 import os
 import sqlite3
 import stat
-from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.sqlite_errors import queue_error
@@ -25,8 +22,7 @@ READ_TIMEOUT_S = 5.0
 DAMAGED_SUFFIX = ".damaged"  # written by ``recovery`` when a check finds damage
 
 
-@dataclass(frozen=True)
-class ServiceState:
+class ServiceState(NamedTuple):
     """The running service's last heartbeat (``service_state.py`` writes it)."""
 
     heartbeat_at: float
@@ -34,11 +30,13 @@ class ServiceState:
     document: dict[str, Any]
 
 
-@dataclass
-class QueueStats:
+class QueueStats(NamedTuple):
     """The queue's counters and oldest/newest events, its files' size, and the service's
     last heartbeat (None when no service ever ran on this queue). ``extra_drops`` are
-    drops counted in memory and not yet written (the disk was full)."""
+    drops counted in memory and not yet written (the disk was full).
+
+    A NamedTuple, as the other records on ``status``'s path: ``dataclasses`` imports
+    ``inspect``, 7 ms of a health check's 30 (docs/benchmarks.md, "Start-up")."""
 
     path: str
     counters: dict[str, int]
@@ -49,13 +47,15 @@ class QueueStats:
     leased: int
     service: ServiceState | None = None
     max_bytes: int = 0
-    extra_drops: dict[str, int] = field(default_factory=dict)
+    extra_drops: dict[str, int] | None = None
     damaged: str | None = None
-    resolution: list[dict[str, Any]] = field(default_factory=list)
+    resolution: tuple[dict[str, Any], ...] = ()
 
-    def add_deferred(self, deferred: dict[str, int]) -> None:
-        """Add the drops counted in memory and not yet written (the disk was full)."""
-        self.extra_drops = {name[5:]: n for name, n in deferred.items() if name.startswith("drop:")}
+    def with_deferred(self, deferred: dict[str, int], max_bytes: int) -> "QueueStats":
+        """These stats as the store sees them: its cap, and the drops counted in memory
+        and not yet written (the disk was full)."""
+        drops = {name[5:]: n for name, n in deferred.items() if name.startswith("drop:")}
+        return self._replace(max_bytes=max_bytes, extra_drops=drops)
 
     @property
     def depth(self) -> int:
@@ -86,7 +86,7 @@ class QueueStats:
     def drops(self) -> dict[str, int]:
         """Events that left the queue other than by delivery, by reason."""
         drops = {k[5:]: v for k, v in self.counters.items() if k.startswith("drop:") and v}
-        for reason, count in self.extra_drops.items():
+        for reason, count in (self.extra_drops or {}).items():
             drops[reason] = drops.get(reason, 0) + count
         return {reason: n for reason, n in drops.items() if n}
 
@@ -139,11 +139,11 @@ def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueSt
         service=service,
         damaged=_damage_found(path),
         # only a thinned queue has bands to show; the others need no scan
-        resolution=_resolution(connection, now) if counters.get("drop:thinned") else [],
+        resolution=_resolution(connection, now) if counters.get("drop:thinned") else (),
     )
 
 
-def _resolution(connection: sqlite3.Connection, now: float) -> list[dict[str, Any]]:
+def _resolution(connection: sqlite3.Connection, now: float) -> tuple[dict[str, Any], ...]:
     """The periodic history's resolution by age, oldest first: for each thinning level
     present, the ages it spans and the events it holds (``thinning``). Reads every row's
     small columns, not the bodies: a frame of 100 events is one row."""
@@ -151,7 +151,7 @@ def _resolution(connection: sqlite3.Connection, now: float) -> list[dict[str, An
         "SELECT thin_level, min(queued_at), max(coalesce(newest_at, queued_at)), sum(count) "
         "FROM events WHERE important = 0 GROUP BY thin_level ORDER BY thin_level DESC"
     ).fetchall()
-    return [
+    return tuple(
         {
             "keeps": f"1 in {2**level}" if level else "all",
             "oldest_age_s": round(max(0.0, now - oldest), 1),
@@ -159,7 +159,7 @@ def _resolution(connection: sqlite3.Connection, now: float) -> list[dict[str, An
             "events": int(events),
         }
         for level, oldest, newest, events in bands
-    ]
+    )
 
 
 def _damage_found(path: str) -> str | None:

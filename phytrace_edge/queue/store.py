@@ -395,6 +395,4 @@ class QueueStore:
                 stats = stats_from(self._db.connection, str(self.path), self._clock())
             except sqlite3.Error as exc:
                 raise queue_error(exc, self.path) from exc
-        stats.max_bytes = self.limits.max_bytes
-        stats.add_deferred(self._db.deferred_counts())
-        return stats
+        return stats.with_deferred(self._db.deferred_counts(), self.limits.max_bytes)

@@ -6,14 +6,14 @@ not be kept alive; PhyCloud refuses the API key; the queue is above
 QUEUE_WARN_FRACTION of its cap; or events are waiting and nothing was sent for
 HEALTH_NO_PROGRESS_S.
 
-On the start-up path of ``status``: nothing outside the standard library.
+On the start-up path of ``status``: nothing outside the standard library, and its
+thresholds are read from the settings here rather than in ``runtime/options.py``, which
+imports every stage's options (docs/benchmarks.md, "Start-up").
 """
 
-from __future__ import annotations
+from typing import Any, NamedTuple, cast
 
-from dataclasses import dataclass
-from typing import Any, cast
-
+from phytrace_edge.config import Settings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.runtime.documents import (
@@ -26,14 +26,19 @@ from phytrace_edge.runtime.documents import (
 from phytrace_edge.udm.event import format_timestamp
 
 
-@dataclass(frozen=True)
-class Thresholds:
+class Thresholds(NamedTuple):
     """HEALTH_STALE_S, HEALTH_NO_PROGRESS_S, QUEUE_WARN_FRACTION and QUEUE_MAX_BYTES."""
 
     health_stale_s: float
     no_progress_s: float
     queue_warn_fraction: float
     queue_max_bytes: int
+
+
+def thresholds(s: Settings) -> Thresholds:
+    return Thresholds(
+        s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
+    )
 
 
 def _iso(unix_s: float | None) -> str | None:
@@ -110,7 +115,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
             "damaged": stats.damaged,
         },
         "lanes": _lanes(sender, oldest_age, now),
-        "resolution": stats.resolution,
+        "resolution": list(stats.resolution),
         "drops": _drops(stats.drops, service),
         "dead_letters": stats.dead_letters,
         "queued_total": stats.queued_total,

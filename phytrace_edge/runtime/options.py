@@ -1,8 +1,9 @@
-"""The settings, turned into each part's plain options: the only module besides
-``runtime/wiring.py`` that reads ``Settings`` (each stage owns its options' defaults).
+"""The settings, turned into each part's plain options: with ``runtime/wiring.py`` the
+only module that reads ``Settings`` (each stage owns its options' defaults). The one
+exception is the health thresholds, read by ``runtime/health.py`` itself so that
+``status`` does not import every stage's options to start.
 
-It imports only the options of the stages, never the stages themselves: ``status``
-reads its queue path and thresholds here and must start fast.
+It imports only the options of the stages, never the stages themselves.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.sources.base import SourceOptions
 from phytrace_edge.ingest.sources.dds_env import domain_settings
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.runtime import health
 from phytrace_edge.runtime.health import Thresholds
 from phytrace_edge.runtime.logs import configure_logging as configure_logs
 from phytrace_edge.ship.options import SendPolicy, claim_lease_s
@@ -157,12 +159,6 @@ def send_policy(s: Settings) -> SendPolicy:
     )
 
 
-def health_thresholds(s: Settings) -> Thresholds:
-    return Thresholds(
-        s.health_stale_s, s.health_no_progress_s, s.queue_warn_fraction, s.queue_max_bytes
-    )
-
-
 def service_options(s: Settings) -> ServiceOptions:
     return ServiceOptions(
         input_label=s.bridge_input,
@@ -178,5 +174,5 @@ def service_options(s: Settings) -> ServiceOptions:
         health_event_interval_s=0.0
         if s.bridge_input.startswith("bag:")
         else (s.health_event_interval_s),
-        thresholds=health_thresholds(s),
+        thresholds=health.thresholds(s),
     )

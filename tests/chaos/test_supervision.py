@@ -9,7 +9,7 @@ from pathlib import Path
 from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime import options, wiring
-from phytrace_edge.runtime.health import report
+from phytrace_edge.runtime.health import report, thresholds
 from phytrace_edge.ship.responses import Reply
 from tests.processes import wait_for
 
@@ -56,7 +56,7 @@ def test_a_sender_thread_killed_by_an_exception_is_restarted_and_the_backlog_dra
         service.heartbeat.write(running=True)
         document = report(
             read_stats(options.queue_path(settings), service.store.now()),
-            options.health_thresholds(settings),
+            thresholds(settings),
             service.store.now(),
         )
         restarts = service.supervisor.restarts["sender"]

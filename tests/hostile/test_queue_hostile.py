@@ -20,7 +20,7 @@ from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import options, wiring
-from phytrace_edge.runtime.health import report
+from phytrace_edge.runtime.health import report, thresholds
 from tests.processes import BridgeProcess, python_env, run_cli, wait_for
 
 ROOT = pytest.mark.skipif(os.geteuid() != 0, reason="needs root (mknod, mount); CI runs as root")
@@ -90,7 +90,7 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
             service.heartbeat.write(running=True)
             now = time.time()
             stats = read_stats(options.queue_path(settings), now)
-            return report(stats, options.health_thresholds(settings), now)
+            return report(stats, thresholds(settings), now)
 
         # sending works again, so status soon says healthy (a stage that waited out the
         # lock may show its wait for a heartbeat or two)

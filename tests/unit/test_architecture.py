@@ -243,9 +243,14 @@ def test_only_the_queue_opens_sqlite_and_only_the_transport_and_stub_talk_http()
 
 def test_no_stage_reads_the_configuration() -> None:
     """Settings are read by runtime/options.py and runtime/wiring.py (and the CLI,
-    which loads them); run_simulation only hands its caller's settings to wiring."""
+    which loads them), the health thresholds by runtime/health.py (for ``status``'s
+    start-up); run_simulation only hands its caller's settings to wiring."""
     readers = {m for m in importers_of("phytrace_edge.config") if component(m) != "config"}
-    runtime = {"phytrace_edge.runtime.options", "phytrace_edge.runtime.wiring"}
+    runtime = {
+        "phytrace_edge.runtime.options",
+        "phytrace_edge.runtime.wiring",
+        "phytrace_edge.runtime.health",
+    }
     passes_through = {"phytrace_edge.runtime.simulation"}
     assert readers - runtime - passes_through == {m for m in readers if component(m) == "cli"}
 
