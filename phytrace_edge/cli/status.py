@@ -4,14 +4,13 @@ healthy, 1 unhealthy, 3 not running."""
 from __future__ import annotations
 
 import argparse
-import time
 from typing import Any
 
 from phytrace_edge.cli.common import error, print_json
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING
 from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime.documents import StatusReport
+from phytrace_edge.runtime.documents import ClockSection, StatusReport
 from phytrace_edge.runtime.health import exit_code, report, thresholds
 from phytrace_edge.units import format_bytes
 
@@ -29,12 +28,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running."""
     path = loaded.settings.queue_path  # loading fills in its default
-    now = time.time()
-    stats = read_stats(str(path), now)
+    stats = read_stats(str(path))
     if stats is None:
         error(f"no queue at {path}: the bridge never ran with this QUEUE_PATH")
         return EXIT_NOT_RUNNING
-    document = report(stats, thresholds(loaded.settings), now)
+    document = report(stats, thresholds(loaded.settings), stats.read_at)
     if args.json:
         print_json(document)
     elif not args.quiet:
@@ -101,6 +99,8 @@ def render_status(d: StatusReport) -> str:
         lines.append(f"  last error   {d['last_error']} at {d['last_error_at']}")
     drops = ", ".join(f"{reason} {n}" for reason, n in d["drops"].items()) or "none"
     lines.append(f"  drops        {drops}")
+    if (clock := render_clock(d["clock"])) is not None:
+        lines.append(f"  clock        {clock}")
     lines.append(
         f"  dead letters {d['dead_letters']}"
         + ("  (phytrace-edge dead-letters list)" if d["dead_letters"] else "")
@@ -114,6 +114,17 @@ def render_status(d: StatusReport) -> str:
         )
     lines += [f"  problem: {problem}" for problem in d["problems"]]
     return "\n".join(lines)
+
+
+def render_clock(clock: ClockSection) -> str | None:
+    """The wall clock, when there is something to say: not synchronized (a robot
+    without a real-time clock, before NTP), or a step seen."""
+    parts = []
+    if clock["synchronized"] is False:
+        parts.append("not synchronized (the kernel says so)")
+    if clock["last_step_s"] is not None:
+        parts.append(f"last step {clock['last_step_s']:+.1f} s at {clock['last_step_at']}")
+    return "; ".join(parts) or None
 
 
 def topic_notes(t: dict[str, Any]) -> list[str]:

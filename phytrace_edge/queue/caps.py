@@ -28,7 +28,6 @@ ROW_OVERHEAD_BYTES = 96  # event_id, numbers, record and cell headers of one row
 PAGE_FILL = 1.15  # B-tree pages are not full: bytes on disk per byte stored
 WAL_RESERVE_MAX = 4 * MIB
 RECHECK_EVERY = 64
-MAX_DROP_ROUNDS = 8
 MEASURE_FOOTPRINT_AFTER = 32  # events, before which the footprint is only estimated
 
 Row = TypeVar("Row")
@@ -124,13 +123,15 @@ class Caps:
             return used + per_event * len(rows) - self.data_cap
 
         excess_bytes = over()
-        if limits.makes_room:
-            for _ in range(MAX_DROP_ROUNDS):  # deleted rows free whole pages only
-                if excess_bytes <= 0 or not self._free(
-                    cursor, math.ceil(excess_bytes / per_event) + 1, "cap_bytes", now
-                ):
-                    break
-                excess_bytes = over()
+        # Deleted rows free whole pages only, so a round may free less than it deleted:
+        # go on until the new rows fit or nothing unleased is left (each round deletes
+        # at least one row, so this ends); new rows are refused only then.
+        while (
+            limits.makes_room
+            and excess_bytes > 0
+            and self._free(cursor, math.ceil(excess_bytes / per_event) + 1, "cap_bytes", now)
+        ):
+            excess_bytes = over()
         if excess_bytes > 0:  # drop_newest, or everything older is being sent
             keep = max(0, len(rows) - math.ceil(excess_bytes / per_event))
             bump_counters(cursor, **{"drop:cap_bytes": len(rows) - keep})

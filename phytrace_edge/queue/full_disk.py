@@ -14,8 +14,9 @@ import os
 import time
 from pathlib import Path
 
-from phytrace_edge.queue.caps import ROW_OVERHEAD_BYTES
-from phytrace_edge.queue.database import Database
+from phytrace_edge.errors import QueueError
+from phytrace_edge.queue.caps import ROW_OVERHEAD_BYTES, drop_oldest
+from phytrace_edge.queue.database import Database, bump_counters
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,25 @@ class FullDisk:
         need, so sealing waits for twice the WAL's share to be free."""
         free = os.statvfs(path.parent)
         return free.f_bavail * free.f_frsize >= 2 * self._wal_reserve
+
+    def evict_oldest(self, count: int, now: float) -> bool:
+        """Drop the ``count`` oldest events (not those being sent) as ``disk_full``, to
+        keep new ones (QUEUE_ON_FULL=drop_oldest or thin); False when none could go."""
+        try:
+            with self._db.transaction() as cursor:
+                return drop_oldest(cursor, count, "disk_full", now) > 0
+        except QueueError:
+            return False
+
+    def count_refused(self, count: int) -> None:
+        """Count events put and dropped at once: in the database if a transaction still
+        fits, else in memory until one does."""
+        counts = {"drop:disk_full": count, "queued_total": count}
+        try:
+            with self._db.transaction() as cursor:
+                bump_counters(cursor, **counts)
+        except QueueError:
+            self._db.defer_counts(**counts)
 
     def report_refused(self, path: Path, count: int) -> None:
         """Log refused events once a minute, not per event."""

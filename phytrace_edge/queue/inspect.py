@@ -13,9 +13,11 @@ import json
 import os
 import sqlite3
 import stat
+import time
 from typing import Any, NamedTuple
 
 from phytrace_edge.errors import QueueError
+from phytrace_edge.queue.clock import queue_time_now
 from phytrace_edge.queue.sqlite_errors import queue_error
 
 READ_TIMEOUT_S = 5.0
@@ -28,6 +30,15 @@ class ServiceState(NamedTuple):
     heartbeat_at: float
     running: bool
     document: dict[str, Any]
+
+
+class ClockState(NamedTuple):
+    """The machine's clock as the queue last saw it (``queue/clock.py``)."""
+
+    wall_offset: float  # wall clock minus queue time when read: turns queue times into dates
+    synchronized: bool | None  # at the last record; None for a queue from before queue time
+    last_step_s: float | None  # the last step of the wall clock seen, + forward
+    last_step_at: float | None  # when (queue time)
 
 
 class QueueStats(NamedTuple):
@@ -50,6 +61,8 @@ class QueueStats(NamedTuple):
     extra_drops: dict[str, int] | None = None
     damaged: str | None = None
     resolution: tuple[dict[str, Any], ...] = ()
+    clock: ClockState = ClockState(0.0, None, None, None)
+    read_at: float = 0.0  # queue time
 
     def with_deferred(self, deferred: dict[str, int], max_bytes: int) -> "QueueStats":
         """These stats as the store sees them: its cap, and the drops counted in memory
@@ -103,8 +116,11 @@ def file_bytes(path: str | os.PathLike[str]) -> int:
     return total
 
 
-def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueStats:
-    """Read the stats through ``connection`` (the caller holds any lock it needs)."""
+def stats_from(
+    connection: sqlite3.Connection, path: str, now: float, wall_offset: float = 0.0
+) -> QueueStats:
+    """Read the stats through ``connection`` (the caller holds any lock it needs) at
+    ``now`` (queue time), ``wall_offset`` being the wall clock minus queue time."""
     tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
     if "counters" not in tables:
         raise QueueError(f"queue {path}: not a phytrace-edge queue - check QUEUE_PATH")
@@ -138,6 +154,8 @@ def stats_from(connection: sqlite3.Connection, path: str, now: float) -> QueueSt
         leased=int(leased),
         service=service,
         damaged=_damage_found(path),
+        clock=_clock_state(connection, tables, wall_offset),
+        read_at=now,
         # only a thinned queue has bands to show; the others need no scan
         resolution=_resolution(connection, now) if counters.get("drop:thinned") else (),
     )
@@ -162,6 +180,24 @@ def _resolution(connection: sqlite3.Connection, now: float) -> tuple[dict[str, A
     )
 
 
+def _clock_state(
+    connection: sqlite3.Connection, tables: set[str], wall_offset: float
+) -> ClockState:
+    if "clock_steps" not in tables:  # a queue from before queue time
+        return ClockState(wall_offset, None, None, None)
+    synchronized = connection.execute(
+        "SELECT value FROM meta WHERE key = 'clock_last_synchronized'"
+    ).fetchone()
+    step = connection.execute("SELECT step_s, at FROM clock_steps ORDER BY at DESC LIMIT 1")
+    last_step_s, last_step_at = step.fetchone() or (None, None)
+    return ClockState(
+        wall_offset,
+        None if synchronized is None else synchronized[0] == "1",
+        last_step_s,
+        last_step_at,
+    )
+
+
 def _damage_found(path: str) -> str | None:
     """What the last integrity check found wrong, if it did (``recovery``)."""
     try:
@@ -173,10 +209,11 @@ def _damage_found(path: str) -> str | None:
         return f"cannot read the damage marker ({exc.strerror})"
 
 
-def read_stats(path: str, now: float) -> QueueStats | None:
-    """The stats of the queue at ``path`` without writing to it; None when there is no
-    file there. Raises a one-line ``QueueError`` for anything that is not a readable
-    queue (a directory, a device, another application's file, a corrupt file)."""
+def read_stats(path: str, now: float | None = None) -> QueueStats | None:
+    """The stats of the queue at ``path`` without writing to it, at ``now`` (queue
+    time; by default the queue's own now); None when there is no file there. Raises a
+    one-line ``QueueError`` for anything that is not a readable queue (a directory, a
+    device, another application's file, a corrupt file)."""
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
@@ -196,7 +233,8 @@ def read_stats(path: str, now: float) -> QueueStats | None:
     try:
         connection = sqlite3.connect(f"{uri}?{options}", uri=True, timeout=READ_TIMEOUT_S)
         try:
-            return stats_from(connection, path, now)
+            now = queue_time_now(connection) if now is None else now
+            return stats_from(connection, path, now, wall_offset=time.time() - now)
         finally:
             connection.close()
     except sqlite3.Error as exc:

@@ -1,17 +1,11 @@
 """QueueStore: the durable hand-off between build and ship, one SQLite file in WAL mode.
 
-Build appends (``put``/``put_many``, each event with its class); ship takes events
-under a lease, the oldest (``claim_batch``) or the newest (``claim_live``), sends them,
-and deletes them only after PhyCloud accepted them (``ack``), or gives them back
-(``release``).
-
-Durability: ``put`` returns after its transaction committed; with QUEUE_SYNC=full
-(the default) that includes an fsync of the WAL, so an acknowledged event survives a
-kill -9 and a power loss. Grouped puts share one fsync (group commit). Claims, acks
-and lease renewals commit without an fsync of their own: losing one to a power cut
-only makes the bridge send a batch again, which PhyCloud deduplicates, and the next
-put's fsync makes them durable anyway (docs/queue.md, "What survives what"). Events
-that wait (an outage) are packed into frames by the writer (``frames``).
+Build appends (``put_many``, each event with its class); ship claims the oldest
+(``claim_batch``) or newest (``claim_live``) under a lease, and deletes them only once
+PhyCloud accepted them (``ack``) or gives them back (``release``). ``put`` returns
+after its commit (QUEUE_SYNC=full: an fsync; docs/queue.md, "What survives what").
+Events that wait are packed into frames (``frames``); every time stored is queue time
+(``clock``), which never steps with the wall clock.
 
 Every event that leaves other than by ``ack`` is counted by reason: ``thinned``,
 ``cap_bytes``, ``cap_events``, ``ttl``, ``disk_full``, ``rejected`` (dead-lettered).
@@ -34,9 +28,10 @@ import orjson
 
 from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
 from phytrace_edge.queue import claims, leases, maintenance
-from phytrace_edge.queue.caps import Caps, drop_oldest, wal_reserve
+from phytrace_edge.queue.caps import Caps, wal_reserve
+from phytrace_edge.queue.clock import SystemClocks, open_queue_time
 from phytrace_edge.queue.codecs import Codecs, Encoded
-from phytrace_edge.queue.database import Database, bump_counters, configure
+from phytrace_edge.queue.database import Database, configure
 from phytrace_edge.queue.dead_letters import DeadLetterBox, dead_letter_row
 from phytrace_edge.queue.defaults import (
     DEFAULT_BUSY_TIMEOUT_S,
@@ -72,7 +67,8 @@ class QueueStore:
         *,
         limits: QueueLimits,
         compression: str = DEFAULT_COMPRESSION,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] | None = None,
+        clocks: SystemClocks | None = None,
         lease_s: float = DEFAULT_LEASE_S,
         frame_events: int = FRAME_EVENTS,
     ) -> None:
@@ -80,7 +76,9 @@ class QueueStore:
         self.path = db.path
         self.limits = limits
         self.lease_s = lease_s
-        self._clock = clock
+        # queue time (queue/clock.py), unless a test brings its own clock
+        self.queue_time = None if clock else open_queue_time(db.write, clocks or SystemClocks())
+        self._clock = clock or self.queue_time.now  # type: ignore[union-attr]
         self._owner = Owner(db.path)
         self._claims = itertools.count(1)
         self.busy_timeout_s = DEFAULT_BUSY_TIMEOUT_S
@@ -94,10 +92,10 @@ class QueueStore:
         # more room than the full-disk reserve holds
         room = min(self._wal_reserve, db.reserve.size if db.reserve else self._wal_reserve)
         db.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // db.page_size // 2)}")
-        load_dictionaries(db, self.codecs, clock())
+        load_dictionaries(db, self.codecs, self._clock())
         self._sealer = Sealer(self.codecs, frame_events)
         self._seal_after = 0.0  # store clock: no sealing before (the disk was full)
-        self.dead_letters = DeadLetterBox(db, self.codecs, self._caps, clock)
+        self.dead_letters = DeadLetterBox(db, self.codecs, self._caps, self._clock)
 
     @classmethod
     def open(
@@ -107,7 +105,8 @@ class QueueStore:
         limits: QueueLimits | None = None,
         compression: str = DEFAULT_COMPRESSION,
         sync: str = DEFAULT_SYNC,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] | None = None,
+        clocks: SystemClocks | None = None,
         lease_s: float = DEFAULT_LEASE_S,
         busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S,
         frame_events: int = FRAME_EVENTS,
@@ -115,11 +114,13 @@ class QueueStore:
         """Open (creating, checking, migrating) the queue at ``path``.
 
         A corrupt or non-SQLite file is moved aside and a fresh queue started (see
-        ``recovery``); the store remembers the moved file for ``stats``. Tests pass a
-        small ``frame_events`` to see frames form.
+        ``recovery``); the store remembers the moved file for ``stats``. Its clock is
+        queue time (``queue/clock.py``) read from ``clocks``; tests of ages pass a
+        ``clock`` of their own instead, and a small ``frame_events`` to see frames form.
         """
         options = {"limits": limits or QueueLimits(), "compression": compression}
-        options |= {"clock": clock, "lease_s": lease_s, "frame_events": frame_events}
+        options |= {"clock": clock, "clocks": clocks}
+        options |= {"lease_s": lease_s, "frame_events": frame_events}
         try:
             return cls._open_once(Path(path), sync, busy_timeout_s, options)
         except QueueDamagedError:
@@ -162,8 +163,13 @@ class QueueStore:
         self._db.close()
         self._owner.close()
 
+    def wall(self) -> float:
+        """The wall clock as the store's clocks read it (a test's own clock is both)."""
+        return self.queue_time.clocks.read().wall if self.queue_time else self._clock()
+
     def now(self) -> float:
-        """The store's clock (unix seconds); injectable for tests of TTL and leases."""
+        """The store's clock: queue time, which never steps with the wall clock (or a
+        test's own clock). Every time the queue stores is on it."""
         return self._clock()
 
     def __enter__(self) -> QueueStore:
@@ -191,12 +197,12 @@ class QueueStore:
         try:
             return self._insert(rows)
         except QueueFullError:
-            if self.limits.makes_room and self._evict_oldest(
-                max(len(rows), self._db.counter("depth") // 100), "disk_full"
+            if self.limits.makes_room and self._full_disk.evict_oldest(
+                max(len(rows), self._db.counter("depth") // 100), self._clock()
             ):
                 with contextlib.suppress(QueueFullError):
                     return self._insert(rows)
-            self._count_drop("disk_full", len(rows))
+            self._full_disk.count_refused(len(rows))
             self._full_disk.report_refused(self.path, len(rows))
             return PutResult(0, len(rows))
 
@@ -241,22 +247,6 @@ class QueueStore:
             return
         if sealed:
             self._caps.room.forget()
-
-    def _evict_oldest(self, count: int, reason: str) -> bool:
-        try:
-            with self._db.transaction() as cursor:
-                return drop_oldest(cursor, count, reason, self._clock()) > 0
-        except QueueError:
-            return False
-
-    def _count_drop(self, reason: str, count: int) -> None:
-        """Count events put and dropped at once (the disk is full)."""
-        counts = {f"drop:{reason}": count, "queued_total": count}
-        try:
-            with self._db.transaction() as cursor:
-                bump_counters(cursor, **counts)
-        except QueueError:
-            self._db.defer_counts(**counts)
 
     # ------------------------------------------------------------------ claim / ack
 
@@ -347,6 +337,14 @@ class QueueStore:
             log.warning("queue %s: %d event(s) older than QUEUE_TTL_S expired", self.path, expired)
         return expired
 
+    def record_clocks(self) -> float:
+        """Write the last moment seen, for the next boot's queue time, and any step of
+        the wall clock since the last look; the step in seconds (0.0 for none)."""
+        step = self._db.write(self.queue_time.record, durable=False) if self.queue_time else 0.0
+        if step:
+            log.warning("queue %s: the wall clock stepped by %+.1f s", self.path, step)
+        return step
+
     def reclaim_space(self, force: bool = False) -> int:
         """Give free pages back to the file system (see ``maintenance``); bytes freed."""
         before = self.file_bytes()
@@ -355,8 +353,10 @@ class QueueStore:
         return max(0, before - self.file_bytes())
 
     def maintain(self) -> None:
-        """Periodic upkeep: TTL expiry, space reclaim, the integrity check the open did
-        not finish (then daily), and the full-disk reserve again once the disk has room."""
+        """Periodic upkeep: the clocks' last moment (and any step of the wall clock),
+        TTL expiry, space reclaim, the integrity check the open did not finish (then
+        daily), and the full-disk reserve again once the disk has room."""
+        self.record_clocks()
         self.expire()
         self.reclaim_space()
         if time.monotonic() >= self.next_check_at:
@@ -392,7 +392,8 @@ class QueueStore:
         """What ``status`` shows about the queue (drops not yet written included)."""
         with self._db.lock:
             try:
-                stats = stats_from(self._db.connection, str(self.path), self._clock())
+                now, wall = self._clock(), self.wall()
+                stats = stats_from(self._db.connection, str(self.path), now, wall - now)
             except sqlite3.Error as exc:
                 raise queue_error(exc, self.path) from exc
         return stats.with_deferred(self._db.deferred_counts(), self.limits.max_bytes)

@@ -77,6 +77,12 @@ class Lanes(TypedDict):
     backlog_oldest_age_s: float | None
 
 
+class ClockSection(TypedDict):
+    synchronized: bool | None  # the kernel's word at the queue's last record
+    last_step_s: float | None  # the last step of the wall clock seen, + forward
+    last_step_at: str | None
+
+
 class StatusReport(TypedDict):
     healthy: bool
     running: bool
@@ -104,3 +110,4 @@ class StatusReport(TypedDict):
     thread_restarts: dict[str, int]
     stages: dict[str, StageFigures]
     topics: dict[str, dict[str, Any]]
+    clock: ClockSection

@@ -41,8 +41,9 @@ def thresholds(s: Settings) -> Thresholds:
     )
 
 
-def _iso(unix_s: float | None) -> str | None:
-    return None if unix_s is None else format_timestamp(unix_s)
+def _date(queue_time: float | None, stats: QueueStats) -> str | None:
+    """A queue time as the date the wall clock now gives it."""
+    return None if queue_time is None else format_timestamp(queue_time + stats.clock.wall_offset)
 
 
 def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
@@ -103,7 +104,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
             for key in ("pid", "version", "input", "source_id", "endpoint_host")
             if key in service
         }
-        | {"started_at": _iso(service.get("started_at"))},
+        | {"started_at": _date(service.get("started_at"), stats)},
         "queue": {
             "path": stats.path,
             "depth": stats.depth,
@@ -122,10 +123,10 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
         "sent_total": stats.acked_total,
         "exported_total": stats.exported_total,
         "send_rate_eps": sender.get("send_rate_eps", 0.0) if running else 0.0,
-        "last_success_at": _iso(last_success),
+        "last_success_at": _date(last_success, stats),
         "last_error": sender.get("last_error"),
         "last_error_class": sender.get("last_error_class"),
-        "last_error_at": _iso(sender.get("last_error_at")),
+        "last_error_at": _date(sender.get("last_error_at"), stats),
         "retries": sender.get("retries", 0),
         "batches_split": sender.get("batches_split", 0),
         "auth_failures": sender.get("auth_failures", 0),
@@ -134,6 +135,11 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
         "stages": stages,
         "topics": _topics_now(service.get("topics", {}), heartbeat_age, running),
+        "clock": {
+            "synchronized": stats.clock.synchronized,
+            "last_step_s": stats.clock.last_step_s,
+            "last_step_at": _date(stats.clock.last_step_at, stats),
+        },
     }
 
 

@@ -122,5 +122,8 @@ class HealthEvents:
         document = report(stats, self._thresholds, now)
         trigger = self._schedule.trigger(document["healthy"], now) if trigger is None else trigger
         if trigger is not None:
-            event = health_event(self._identity, document, trigger, now - self._started_at, now)
+            captured_at = now + stats.clock.wall_offset  # an event's time is a date
+            event = health_event(
+                self._identity, document, trigger, now - self._started_at, captured_at
+            )
             self._emit(Built(event, important=trigger != "interval"))

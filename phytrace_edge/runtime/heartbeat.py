@@ -167,7 +167,7 @@ class Heartbeat:
             "send": self.sender.stats.events_sent,
             **{f"topic:{t}": n for t, n in self.pipeline.dispatcher.received.items()},
         }
-        rates = self._rates.update(counters, time.time())
+        rates = self._rates.update(counters, time.monotonic())
         sender = cast(SenderFigures, self.sender.stats.as_dict())
         document = service_document(
             self.options,

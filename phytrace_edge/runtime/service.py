@@ -78,7 +78,7 @@ class BridgeService:
 
     def status_line(self) -> str:
         """One line for `systemctl status`."""
-        return status_line(self.store.counter("depth"), self.sender.stats, time.time())
+        return status_line(self.store.counter("depth"), self.sender.stats, self.store.now())
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -112,8 +112,9 @@ class BridgeService:
     def _heartbeat_loop(self, stop: threading.Event, beat: Beat) -> None:
         while not stop.wait(HEARTBEAT_S):
             try:
+                self.store.record_clocks()  # a step of the wall clock is seen within a beat
                 self.heartbeat.write(running=True)
-                self.health_events.emit_if_due(self.store.stats(), time.time())
+                self.health_events.emit_if_due(self.store.stats(), self.store.now())
             except QueueError as exc:  # busy or full for now: the next beat tries again
                 log.warning("heartbeat not written: %s", exc)
             beat()
@@ -127,6 +128,7 @@ class BridgeService:
             due = time.monotonic() + MAINTENANCE_EVERY_S
             try:
                 self.store.maintain()
+                log.debug("queue maintenance pass done")
             except QueueError as exc:
                 log.warning("queue maintenance failed (%s); will try again", exc)
 
@@ -151,7 +153,7 @@ class BridgeService:
         self.pipeline.close()
         sup.stop("heartbeat", STOP_TIMEOUT_S)  # it emits health events: none after the writer
         try:
-            self.health_events.emit_if_due(self.store.stats(), time.time(), trigger="stop")
+            self.health_events.emit_if_due(self.store.stats(), self.store.now(), trigger="stop")
         except QueueError as exc:
             log.warning("no stop health event: %s", exc)
         self.outlet.writer.request_stop()

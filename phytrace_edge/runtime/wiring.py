@@ -21,7 +21,6 @@ imports nothing of the bridge.
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -159,7 +158,7 @@ def _service(
     on_event: Callable[[dict[str, Any]], None] | None,
 ) -> BridgeService:
     service_options = options.service_options(s)
-    started_at = time.time()
+    started_at = store.now()
     sender = Sender(store, transport, options.send_policy(s))
     outlet = Outlet(QueueWriter(store), wait_for_disk=source.keeps_time, on_event=on_event)
     pipeline = build_pipeline(s, source, outlet.emit)

@@ -79,7 +79,7 @@ class Sender:
         policy: SendPolicy,
         *,
         stop: threading.Event | None = None,
-        clock: Callable[[], float] = time.time,
+        clock: Callable[[], float] | None = None,
         rng: random.Random | None = None,
         sleep: Callable[[float], object] | None = None,
     ) -> None:
@@ -89,7 +89,8 @@ class Sender:
         self.stop = stop or threading.Event()
         self.flushing = threading.Event()  # shutting down: send partial batches at once
         self.stats = SendStats()
-        self._clock = clock
+        # the store's clock (queue time): the sender's times are compared with its rows'
+        self._clock = clock or store.now
         self._rng = rng or random.Random()
         self._pause = sleep or self._wait_beating
         self._beat: Callable[[], None] = lambda: None
@@ -324,7 +325,8 @@ class Sender:
                 self._throttle.wait(len(body))
                 started = time.monotonic()
                 reply = self.transport.post_events(body, headers)
-                outcome = classify(reply, count, self._clock())
+                # the wall clock: a Retry-After date is one
+                outcome = classify(reply, count, time.time())
                 self.stats.observe_latency(time.monotonic() - started)
                 self._record_success(count, len(body), reply.status)
                 return outcome
