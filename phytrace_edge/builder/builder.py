@@ -73,8 +73,12 @@ class UDMBuilder:
         options: BuilderOptions,
         clock: Clock | None = None,
         field_types: FieldTypes = rosidl_field_types,
+        unsynchronized: Callable[[], bool] | None = None,
     ) -> None:
-        """``field_types`` describes the input's messages (``ingest.generic``)."""
+        """``field_types`` describes the input's messages (``ingest.generic``);
+        ``unsynchronized`` says whether the wall clock that stamps events is not
+        synchronized now (None: the stamps are not this machine's, as a bag's)."""
+        self._unsynchronized = unsynchronized
         self._identity = options.identity.as_dict()
         self._stale_after_s = options.stale_after_s
         self._use_sim_time = options.use_sim_time
@@ -141,7 +145,16 @@ class UDMBuilder:
         for sample in self.extra.take(now_mono):
             event = topic_event(self._identity, sample, captured_at, now_mono, sim)
             built.append(Built(event, sample.mode == "on_change"))
+        if captured_at_s is None:
+            for side_event, _ in built:
+                self._mark_clock(side_event)
         return built
+
+    def _mark_clock(self, event: dict[str, Any]) -> None:
+        """Stamped on this machine's wall clock while the kernel does not call it
+        synchronized: say so, so that a later step can repair it (docs/udm.md, "Time")."""
+        if self._unsynchronized is not None and self._unsynchronized():
+            event["wall_clock"] = {"synchronized": False}
 
     def side_counts(self) -> dict[str, dict[str, int]]:
         """What became of /rosout records and extra-topic messages, per topic."""
@@ -179,6 +192,8 @@ class UDMBuilder:
             stale_after_s=self._stale_after_s,
             use_sim_time=self._use_sim_time,
         )
+        if captured_at_s is None:
+            self._mark_clock(event)
         if any(domain in event for domain in DOMAINS):
             gap = last_data is None or now_mono - last_data > self._stale_after_s
             with self._lock:

@@ -121,7 +121,7 @@ def render_clock(clock: ClockSection) -> str | None:
     without a real-time clock, before NTP), or a step seen."""
     parts = []
     if clock["synchronized"] is False:
-        parts.append("not synchronized (the kernel says so)")
+        parts.append("not known to be synchronized (adjtimex)")
     if clock["last_step_s"] is not None:
         parts.append(f"last step {clock['last_step_s']:+.1f} s at {clock['last_step_at']}")
     return "; ".join(parts) or None

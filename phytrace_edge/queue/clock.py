@@ -23,14 +23,14 @@ A step of the wall clock is seen as a change of ``wall - CLOCK_BOOTTIME`` larger
 
 from __future__ import annotations
 
-import functools
 import sqlite3
 import time
 from collections.abc import Callable
 from typing import NamedTuple
 
+from phytrace_edge.host_clock import boot_id, synchronized
+
 STEP_THRESHOLD_S = 1.0
-BOOT_ID_PATH = "/proc/sys/kernel/random/boot_id"
 
 
 class Instant(NamedTuple):
@@ -51,50 +51,30 @@ class LastSeen(NamedTuple):
     synchronized: bool
 
 
+class Step(NamedTuple):
+    """A step of the wall clock, in queue time: seen at ``at``; the look before it, at
+    ``looked_at``, saw none. Offsets are the wall clock minus queue time."""
+
+    at: float
+    looked_at: float
+    offset_before: float
+    offset_after: float
+
+    @property
+    def seconds(self) -> float:
+        return self.offset_after - self.offset_before
+
+
 class SystemClocks:
     """The machine's clocks; tests pass an object with the same ``read``."""
 
     def read(self) -> Instant:
         return Instant(
-            time.time(), time.clock_gettime(time.CLOCK_BOOTTIME), boot_id(), synchronized()
+            time.time(),
+            time.clock_gettime(time.CLOCK_BOOTTIME),
+            boot_id(),
+            synchronized() is True,  # "will not say" counts no time off across a reboot
         )
-
-
-@functools.cache
-def boot_id() -> str:
-    """The kernel's id of this boot (a container sees its host's); a fixed stand-in
-    where there is none, so such a machine counts every start as the same boot."""
-    try:
-        with open(BOOT_ID_PATH, encoding="ascii") as file:
-            return file.read().strip()
-    except OSError:
-        return "unknown"
-
-
-def synchronized() -> bool:
-    """Whether the kernel says the wall clock is synchronized (``adjtimex`` without
-    STA_UNSYNC), read the way ``ntp_gettime`` does; False where it cannot tell."""
-    import ctypes  # here: only the service and drain ask, never `status` at start-up
-
-    class Timex(ctypes.Structure):  # struct timex up to `status`, then room for the rest
-        _fields_ = [
-            ("modes", ctypes.c_uint),
-            ("offset", ctypes.c_long),
-            ("freq", ctypes.c_long),
-            ("maxerror", ctypes.c_long),
-            ("esterror", ctypes.c_long),
-            ("status", ctypes.c_int),
-            ("rest", ctypes.c_byte * 256),
-        ]
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        timex = Timex()
-        state = libc.adjtimex(ctypes.byref(timex))
-    except (OSError, AttributeError):
-        return False
-    sta_unsync, time_error = 0x0040, 5
-    return state not in (-1, time_error) and not timex.status & sta_unsync
 
 
 def boot_base(now: Instant, last: LastSeen | None) -> float:
@@ -117,7 +97,7 @@ class QueueTime:
         self.base = base
         self.boot_id = boot_id
         self.clocks = clocks
-        self._offset: float | None = None  # wall - CLOCK_BOOTTIME at the last look
+        self._last_look: tuple[float, float] | None = None  # (queue time, wall offset)
 
     def now(self) -> float:
         return self.clocks.read().since_boot + self.base
@@ -125,17 +105,18 @@ class QueueTime:
     def at(self, instant: Instant) -> float:
         return instant.since_boot + self.base
 
-    def record(self, cursor: sqlite3.Cursor) -> float:
-        """``record_moment`` now; the step of the wall clock seen (0.0 for none)."""
+    def record(self, cursor: sqlite3.Cursor) -> Step | None:
+        """``record_moment`` now; the step of the wall clock seen, if one was."""
         return record_moment(cursor, self, self.clocks.read())
 
-    def step_seen(self, instant: Instant) -> float:
-        """How far the wall clock stepped since the last look (0.0 when it did not)."""
-        offset = instant.wall - instant.since_boot
-        previous, self._offset = self._offset, offset
-        if previous is None or abs(offset - previous) <= STEP_THRESHOLD_S:
-            return 0.0
-        return offset - previous
+    def step_seen(self, instant: Instant) -> Step | None:
+        """The step of the wall clock since the last look, if there was one."""
+        at = self.at(instant)
+        offset = instant.wall - at
+        previous, self._last_look = self._last_look, (at, offset)
+        if previous is None or abs(offset - previous[1]) <= STEP_THRESHOLD_S:
+            return None
+        return Step(at, previous[0], previous[1], offset)
 
 
 def open_queue_time(
@@ -159,15 +140,15 @@ def _open(cursor: sqlite3.Cursor, clocks: SystemClocks) -> QueueTime:
     return queue_time
 
 
-def record_moment(cursor: sqlite3.Cursor, queue_time: QueueTime, now: Instant) -> float:
+def record_moment(cursor: sqlite3.Cursor, queue_time: QueueTime, now: Instant) -> Step | None:
     """Write the last moment seen (for the next boot) and any step of the wall clock
-    since the last look; the step in seconds (0.0 for none)."""
+    since the last look, which it returns."""
     step = queue_time.step_seen(now)
     at = queue_time.at(now)
     if step:
         cursor.execute(
             "INSERT OR REPLACE INTO clock_steps(at, step_s, boot_id) VALUES (?, ?, ?)",
-            (at, step, now.boot_id),
+            (at, step.seconds, now.boot_id),
         )
     cursor.executemany(
         "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",

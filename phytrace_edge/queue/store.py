@@ -48,6 +48,7 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.ownership import Owner, dead_owners, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
 from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
+from phytrace_edge.queue.repair import record_clocks
 from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
 from phytrace_edge.queue.rows import NewRow, insert_rows
 from phytrace_edge.queue.service_state import write_service_state
@@ -338,12 +339,10 @@ class QueueStore:
         return expired
 
     def record_clocks(self) -> float:
-        """Write the last moment seen, for the next boot's queue time, and any step of
-        the wall clock since the last look; the step in seconds (0.0 for none)."""
-        step = self._db.write(self.queue_time.record, durable=False) if self.queue_time else 0.0
-        if step:
-            log.warning("queue %s: the wall clock stepped by %+.1f s", self.path, step)
-        return step
+        """Write the last moment seen, for the next boot's queue time; after a step of
+        the wall clock, repair the stamps queued before it (``repair``). The step's
+        seconds (0.0 for none)."""
+        return record_clocks(self._db, self.queue_time, self.codecs) if self.queue_time else 0.0
 
     def reclaim_space(self, force: bool = False) -> int:
         """Give free pages back to the file system (see ``maintenance``); bytes freed."""

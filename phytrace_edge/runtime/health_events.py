@@ -83,6 +83,14 @@ def health_event(
     }
     if report.get("last_error_class"):
         event["last_error_class"] = report["last_error_class"]
+    clock = report["clock"]
+    wall_clock = present(
+        synchronized=clock["synchronized"],
+        last_step_s=clock["last_step_s"],
+        last_step_at=clock["last_step_at"],
+    )
+    if wall_clock:  # the machine's clock, as the queue last saw it
+        event["wall_clock"] = wall_clock
     return event
 
 

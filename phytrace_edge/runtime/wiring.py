@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
@@ -58,7 +59,11 @@ STAGING_LEASE_S = 600.0  # a chunk of a file is sent before its claims lapse
 
 def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -> Pipeline:
     """``source`` -> dispatcher -> builder -> sampler -> ``emit``."""
-    builder = UDMBuilder(options.builder_options(s), source.clock, source.field_types)
+    # a bag's events carry bag time: only this machine's clock can be unsynchronized
+    unsynchronized = None if source.keeps_time else host_clock.unsynchronized
+    builder = UDMBuilder(
+        options.builder_options(s), source.clock, source.field_types, unsynchronized
+    )
     sampler = Sampler(builder, emit, s.sample_rate_hz, before_tick=source.before_tick)
     return Pipeline(source, Dispatcher(builder.add_reading, builder.add_message), builder, sampler)
 

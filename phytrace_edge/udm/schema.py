@@ -1,4 +1,4 @@
-"""The UDM 1.0.0 JSON Schema shipped in the package, and its validator.
+"""The UDM JSON Schema shipped in the package (SCHEMA_FILE), and its validator.
 
 The schema file is the contract PhyCloud and other languages use; this module compiles
 it once (fastjsonschema generates Python code from it, pure Python, so it installs on
@@ -20,7 +20,7 @@ from typing import Any
 
 import fastjsonschema
 
-SCHEMA_VERSION = "1.1.0"
+SCHEMA_VERSION = "1.2.0"
 SCHEMA_FILE = f"udm-{SCHEMA_VERSION}.schema.json"
 
 log = logging.getLogger(__name__)

@@ -119,7 +119,11 @@ def machine() -> Iterator[Machine]:
 
 def test_the_unit_installed_as_documented_runs_under_real_systemd(machine: Machine, stub) -> None:
     for command in install_steps(stub.endpoint):
-        machine.sh(command)
+        try:
+            machine.sh(command)
+        except AssertionError as failed:  # say why: the service's own last words
+            journal = machine.sh("journalctl -u phytrace-edge -n 40 --no-pager", check=False)
+            raise AssertionError(f"{failed}\nthe service's journal:\n{journal}") from None
     # READY: Type=notify is active only once the bridge said so
     assert machine.sh("systemctl is-active phytrace-edge") == "active"
     assert "queued" in machine.show("StatusText")["StatusText"]

@@ -16,6 +16,7 @@ import zstandard
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.handcarry import open_export
+from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
 
 IDENTITY = {"source_id": "mine-amr-3", "source_type": "amr"}
@@ -68,7 +69,8 @@ def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_pat
         reader = open_export(stick)
         list(reader.events())
         manifests.append(reader.manifest)
-    assert manifests[0].source_id == "mine-amr-3" and manifests[0].schema_version == "1.1.0"
+    assert manifests[0].source_id == "mine-amr-3"
+    assert manifests[0].schema_version == SCHEMA_VERSION
     assert manifests[0].last_id < manifests[1].first_id  # oldest first, no overlap
     assert sum(m.events for m in manifests) == 3000
     assert run_cli("status", "--json", **robot(queue)).stdout.count('"exported_total": 3000') == 1

@@ -18,7 +18,7 @@ from functools import cache
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "phytrace_edge"
-BASE = {"udm", "units", "redact", "errors", "_version"}
+BASE = {"udm", "units", "redact", "errors", "_version", "host_clock"}
 MODULE_STRING = re.compile(r"^phytrace_edge(\.[a-z_0-9]+)+(:\w+)?$")
 
 # The dependency rule of runtime/wiring.py's docstring: each component may import the
@@ -39,6 +39,7 @@ DECLARED: dict[str, set[str]] = {
     "redact": set(),
     "errors": set(),
     "_version": set(),
+    "host_clock": set(),
     "launch": set(),
 }
 

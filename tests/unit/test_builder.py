@@ -254,3 +254,25 @@ def test_event_classes_mark_what_must_never_be_thinned(
     clock.advance(6.0)  # nothing heard for longer than STALE_AFTER_S
     assert tick() is True, "the first data after a gap"
     assert tick() is False
+
+
+@pytest.mark.parametrize("unsynchronized", [True, False])
+def test_events_stamped_on_an_unsynchronized_clock_say_so(
+    clock: FakeClock, unsynchronized: bool
+) -> None:
+    builder = UDMBuilder(
+        BuilderOptions(IDENTITY), clock=clock, unsynchronized=lambda: unsynchronized
+    )
+    builder.add_reading("/rosout", {"level": "error", "logger": "nav", "message": "stuck"})
+    events = [builder.build_event(), *(built.event for built in builder.side_events())]
+    assert len(events) == 2
+    for event in events:
+        assert find_violation(event) is None
+        marked = event.get("wall_clock") == {"synchronized": False}
+        assert marked is unsynchronized
+
+
+def test_bag_time_is_never_marked(clock: FakeClock) -> None:
+    """A replay passes the bag's time: not this machine's clock, whatever the kernel says."""
+    builder = UDMBuilder(BuilderOptions(IDENTITY), clock=clock, unsynchronized=lambda: True)
+    assert "wall_clock" not in builder.build_event(captured_at_s=1_700_000_000.0)

@@ -7,13 +7,18 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 
+import orjson
 import pytest
 
-from phytrace_edge.queue.clock import Instant, LastSeen, boot_base, synchronized
+from phytrace_edge.host_clock import synchronized
+from phytrace_edge.queue.clock import Instant, LastSeen, Step, boot_base
+from phytrace_edge.queue.frames import SEAL_AFTER_S
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.repair import stamped_before
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.udm.event import format_timestamp
@@ -42,13 +47,13 @@ class Machine:
         self.wall += seconds
         self.since_boot += seconds
 
-    def reboot(self, off_for: float, wall: float, synchronized: bool) -> None:
-        """Off for a while, then up again with the wall clock at ``wall``."""
+    def reboot(self, wall: float, synchronized: bool) -> None:
+        """Off for a while (which only a true wall clock can tell), then up again 8 s
+        with the wall clock at ``wall``."""
         self.boot_id = f"{self.boot_id}+"
         self.since_boot = 8.0
         self.wall = wall
         self.synchronized = synchronized
-        del off_for  # CLOCK_BOOTTIME starts again: the time off is what the clocks hide
 
 
 def open_store(path: Path, machine: Machine) -> QueueStore:
@@ -124,7 +129,7 @@ def test_a_queue_written_under_a_wrong_clock_survives_a_reboot_onto_the_right_on
     machine.run(120.0)
     store.maintain()
     store.close()
-    machine.reboot(off_for=3 * DAY, wall=NOW, synchronized=True)
+    machine.reboot(wall=NOW, synchronized=True)
     store = open_store(tmp_path / "q.db", machine)
     store.maintain()
     stats = store.stats()
@@ -135,26 +140,27 @@ def test_a_queue_written_under_a_wrong_clock_survives_a_reboot_onto_the_right_on
     store.close()
 
 
-def test_time_off_counts_when_the_clock_was_true_before_and_after(tmp_path: Path) -> None:
+def rebooted_with_two_events(
+    tmp_path: Path, wall: float, synchronized: bool
+) -> tuple[Machine, QueueStore]:
+    """Two events queued on a synchronized clock; then a reboot with ``wall``."""
     machine = Machine(wall=NOW, synchronized=True)
     store = open_store(tmp_path / "q.db", machine)
     store.put_many([event(i) for i in range(2)])
     store.maintain()
     store.close()
-    machine.reboot(off_for=8 * DAY, wall=NOW + 8 * DAY, synchronized=True)
-    store = open_store(tmp_path / "q.db", machine)
+    machine.reboot(wall=wall, synchronized=synchronized)
+    return machine, open_store(tmp_path / "q.db", machine)
+
+
+def test_time_off_counts_when_the_clock_was_true_before_and_after(tmp_path: Path) -> None:
+    _, store = rebooted_with_two_events(tmp_path, wall=NOW + 8 * DAY, synchronized=True)
     assert store.expire() == 2  # really 8 days old: the TTL is 7
     store.close()
 
 
 def test_the_reverse_a_right_clock_then_a_wrong_one(tmp_path: Path) -> None:
-    machine = Machine(wall=NOW, synchronized=True)
-    store = open_store(tmp_path / "q.db", machine)
-    store.put_many([event(i) for i in range(2)])
-    store.maintain()
-    store.close()
-    machine.reboot(off_for=60.0, wall=Y2001, synchronized=False)
-    store = open_store(tmp_path / "q.db", machine)
+    machine, store = rebooted_with_two_events(tmp_path, wall=Y2001, synchronized=False)
     machine.run(30.0)
     assert store.expire() == 0
     assert store.now() - store.stats().oldest_queued_at == pytest.approx(38.0)
@@ -212,4 +218,141 @@ def test_the_kernel_is_asked_whether_the_clock_is_synchronized() -> None:
     libc = ctypes.CDLL(None)
     buffer = ctypes.create_string_buffer(512)
     state = libc.ntp_gettime(buffer)
-    assert synchronized() is (state not in (-1, 5))
+    assert synchronized() is (None if state == -1 else state != 5)
+
+
+def stamped(n: int, machine: Machine) -> dict:
+    """An event as the builder stamps it on this machine's wall clock (marked when the
+    kernel calls the clock unsynchronized)."""
+    stamp = {**event(n), "captured_at": format_timestamp(machine.wall)}
+    if not machine.synchronized:
+        stamp["wall_clock"] = {"synchronized": False}
+    return stamp
+
+
+def put_stamped(store: QueueStore, machine: Machine, seqs_: range) -> None:
+    for n in seqs_:
+        machine.run(0.2)
+        store.put(stamped(n, machine))
+
+
+def claimed(store: QueueStore) -> dict[int, dict]:
+    batch = store.claim_batch(1000, 64 * MIB)
+    assert batch is not None
+    events = {orjson.loads(e.json)["seq"]: orjson.loads(e.json) for e in batch.events}
+    store.ack(batch)
+    return events
+
+
+@pytest.mark.parametrize("step_s", [NOW - Y2001, -DAY, 3.5])
+def test_stamps_queued_before_a_step_are_repaired(tmp_path: Path, step_s: float) -> None:
+    machine = Machine(wall=Y2001 if step_s > DAY else NOW)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()  # the heartbeat's look before the step
+    put_stamped(store, machine, range(5))
+    sending = store.claim_batch(1, MIB)  # event 0 is being sent when the step comes
+    machine.run(0.5)
+    machine.wall += step_s
+    machine.synchronized = True
+    put_stamped(store, machine, range(5, 7))  # stamped after the step, before it is seen
+    machine.run(1.0)
+    assert store.record_clocks() == pytest.approx(step_s)
+    store.release(sending)
+
+    events = claimed(store)
+    assert sorted(events) == list(range(7))
+    unrepaired = events[0]  # it was leased: it goes out marked, as it was
+    assert unrepaired["wall_clock"] == {"synchronized": False}
+    for n in range(1, 5):
+        assert events[n]["wall_clock"]["corrected_by_s"] == pytest.approx(step_s, abs=1e-3)
+        assert events[n]["wall_clock"]["synchronized"] is False
+    stamped_at = {n: datetime.fromisoformat(e["captured_at"][:-1]) for n, e in events.items()}
+    # repaired stamps line up with the ones taken after the step: 0.2 s apart
+    assert (stamped_at[5] - stamped_at[4]).total_seconds() == pytest.approx(0.7, abs=0.01)
+    for n in (5, 6):
+        assert "wall_clock" not in events[n]  # stamped on the synchronized clock
+    store.close()
+
+
+def test_frames_are_repaired_event_by_event(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = QueueStore.open(
+        tmp_path / "q.db",
+        limits=TTL,
+        clocks=machine,
+        frame_events=4,  # type: ignore[arg-type]
+    )
+    store.record_clocks()
+    put_stamped(store, machine, range(8))
+    machine.run(SEAL_AFTER_S + 1)
+    put_stamped(store, machine, range(8, 9))  # the put that seals what waited
+    rows = store._db.read("SELECT count(*) FROM events")[0][0]
+    assert rows < 9  # frames were formed
+    machine.wall, machine.synchronized = NOW, True
+    machine.run(1.0)
+    store.record_clocks()
+    events = claimed(store)
+    assert all(e["wall_clock"].get("corrected_by_s") for e in events.values())
+    assert all(e["captured_at"].startswith("2026-") for e in events.values())
+    stats = store.stats()
+    assert stats.depth == 0 and stats.drops == {}
+    store.close()
+
+
+def test_stamps_of_an_earlier_boot_are_not_repaired(tmp_path: Path) -> None:
+    """They were taken on the previous boot's clock, which this step says nothing about."""
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    put_stamped(store, machine, range(3))
+    store.maintain()
+    store.close()
+    machine.reboot(wall=Y2001 + 5000.0, synchronized=False)
+    store = open_store(tmp_path / "q.db", machine)
+    machine.run(5.0)
+    machine.wall, machine.synchronized = NOW, True
+    assert store.record_clocks() > 0
+    events = claimed(store)
+    assert all(e["wall_clock"] == {"synchronized": False} for e in events.values())
+    store.close()
+
+
+@pytest.mark.parametrize(
+    ("captured_s", "expected"),
+    [
+        (1000.0 + 100.0, True),  # queue time 100 on the old clock (offset 1000)
+        (5000.0 + 101.0, False),  # queue time 101 on the new clock (offset 5000)
+        (3000.0, False),  # neither clock explains it
+    ],
+)
+def test_which_clock_stamped_an_event(captured_s: float, expected: bool) -> None:
+    step = Step(at=102.0, looked_at=100.5, offset_before=1000.0, offset_after=5000.0)
+    assert stamped_before(captured_s, (99.0, 101.5), step) is expected
+
+
+def test_an_event_both_clocks_explain_keeps_its_mark() -> None:
+    """A step of 3 s: a stamp within the last seconds fits either clock, so it is left
+    uncorrected (and still says the clock was not synchronized)."""
+    step = Step(at=102.0, looked_at=100.5, offset_before=1000.0, offset_after=1003.0)
+    assert stamped_before(1102.5, (101.0, 101.0), step) is False
+    assert stamped_before(1090.0, (90.0, 90.0), step) is True  # long before: only the old
+
+
+def test_stamps_after_the_step_on_a_still_unsynchronized_clock_are_left(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()
+    put_stamped(store, machine, range(3))
+    machine.wall = NOW  # set by hand (or GPS without discipline): still not synchronized
+    put_stamped(store, machine, range(3, 5))
+    machine.run(1.0)
+    store.record_clocks()
+    events = claimed(store)
+    assert [("corrected_by_s" in events[n]["wall_clock"]) for n in range(5)] == [
+        True,
+        True,
+        True,
+        False,
+        False,
+    ]
+    assert all(e["captured_at"].startswith("2026-") for e in events.values())
+    store.close()
