@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import time
+from typing import Any
 
 BOOT_ID_PATH = "/proc/sys/kernel/random/boot_id"
 SYNC_CACHE_S = 1.0  # the builder asks at every tick; the kernel's answer is kept a second
@@ -26,6 +27,20 @@ def synchronized() -> bool | None:
     """Whether the kernel says the wall clock is synchronized (``adjtimex`` without
     STA_UNSYNC, read the way ``ntp_gettime`` does); None where it will not say (a
     seccomp filter returning EPERM, as a container's may)."""
+    try:
+        adjtimex, timex = _adjtimex()
+        state = adjtimex(timex)
+    except (OSError, AttributeError):
+        return None
+    sta_unsync, time_error = 0x0040, 5
+    if state == -1:
+        return None
+    return state != time_error and not timex._obj.status & sta_unsync
+
+
+@functools.cache
+def _adjtimex() -> tuple[Any, Any]:
+    """libc's adjtimex and a ``struct timex`` to read into (modes 0: read only)."""
     import ctypes  # here: only the service and drain ask, never `status` at start-up
 
     class Timex(ctypes.Structure):  # struct timex up to `status`, then room for the rest
@@ -39,16 +54,8 @@ def synchronized() -> bool | None:
             ("rest", ctypes.c_byte * 256),
         ]
 
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        timex = Timex()
-        state = libc.adjtimex(ctypes.byref(timex))
-    except (OSError, AttributeError):
-        return None
-    sta_unsync, time_error = 0x0040, 5
-    if state == -1:
-        return None
-    return state != time_error and not timex.status & sta_unsync
+    libc = ctypes.CDLL(None, use_errno=True)
+    return libc.adjtimex, ctypes.byref(Timex())
 
 
 _last_answer = (float("-inf"), False)

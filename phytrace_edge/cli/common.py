@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 from collections.abc import Callable
 from typing import Any, NoReturn
@@ -112,10 +111,3 @@ def add_timeout_flag(parser: argparse.ArgumentParser) -> None:
         type=checked(positive_float(10**7), "seconds"),
         help="give up after this many seconds",
     )
-
-
-def stop_on_signals(stop: Any) -> None:
-    """SIGINT and SIGTERM set ``stop`` (a threading.Event): the sender finishes the
-    request on the wire and keeps the rest queued."""
-    signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
-    signal.signal(signal.SIGTERM, lambda signum, frame: stop.set())

@@ -6,7 +6,8 @@ import argparse
 import sys
 import time
 
-from phytrace_edge.cli.common import add_timeout_flag, stop_on_signals
+from phytrace_edge.cli.common import add_timeout_flag
+from phytrace_edge.cli.signals import stop_on_signals
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.units import format_bytes

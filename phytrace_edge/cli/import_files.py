@@ -10,7 +10,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from phytrace_edge.cli.common import add_timeout_flag, error, stop_on_signals
+from phytrace_edge.cli.common import add_timeout_flag, error
+from phytrace_edge.cli.signals import stop_on_signals
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, QueueError
 from phytrace_edge.runtime import options

@@ -9,6 +9,7 @@ import signal
 import threading
 import time
 
+from phytrace_edge.cli.signals import on_signals
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, StageFailedError
 from phytrace_edge.runtime.sd_notify import SystemdNotifier
@@ -39,7 +40,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     stop = threading.Event()
     first_signal_at: list[float] = []
 
-    def on_signal(signum: int, frame: object) -> None:
+    def on_signal(signum: int) -> None:
         if first_signal_at:
             if time.monotonic() - first_signal_at[0] < DUPLICATE_SIGNAL_S:
                 return  # the same request twice (Ctrl-C under ros2 launch)
@@ -48,8 +49,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
         log.info("received %s: stopping (again to exit at once)", signal.Signals(signum).name)
         stop.set()
 
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    on_signals(on_signal)
     service = wiring.build_service(loaded.settings, os.environ, args.ros_args)
     watchdog.serve(service, SystemdNotifier(os.environ), stop)
     if service.supervisor.failed.is_set():

@@ -66,9 +66,16 @@ class Step(NamedTuple):
 
 
 class SystemClocks:
-    """The machine's clocks; tests pass an object with the same ``read``."""
+    """The machine's clocks; tests pass an object with the same methods."""
+
+    def now_since_boot(self) -> float:
+        return time.clock_gettime(time.CLOCK_BOOTTIME)
+
+    def now_wall(self) -> float:
+        return time.time()
 
     def read(self) -> Instant:
+        """All of it, the kernel's word on synchronization included (a system call)."""
         return Instant(
             time.time(),
             time.clock_gettime(time.CLOCK_BOOTTIME),
@@ -100,7 +107,15 @@ class QueueTime:
         self._last_look: tuple[float, float] | None = None  # (queue time, wall offset)
 
     def now(self) -> float:
-        return self.clocks.read().since_boot + self.base
+        return self.clocks.now_since_boot() + self.base
+
+    def stepped(self) -> bool:
+        """Whether the wall clock stepped since the last look (``record``), without
+        looking: cheap enough for every claim."""
+        if self._last_look is None:
+            return False
+        offset = self.clocks.now_wall() - self.now()
+        return abs(offset - self._last_look[1]) > STEP_THRESHOLD_S
 
     def at(self, instant: Instant) -> float:
         return instant.since_boot + self.base

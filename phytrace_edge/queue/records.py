@@ -25,6 +25,7 @@ class Batch:
     ranges: tuple[tuple[int, int], ...]
     owner: str
     events: list[QueuedEvent]
+    claimed_at: float = 0.0  # queue time
 
     @property
     def first_id(self) -> int:

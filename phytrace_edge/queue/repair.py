@@ -11,8 +11,10 @@ stamped at queue time t reads ``t + offset`` on the clock of its time. It is rep
 when ``captured_at - offset_before`` falls within its row's queue times up to the step,
 and ``captured_at - offset_after`` does not fall within them from the last look before
 the step on. An event neither or both explain keeps its mark, uncorrected: PhyCloud can
-tell that its time is doubtful. Rows being sent are left alone (their events go out
-marked); rows of earlier boots were stamped on another boot's clock.
+tell that its time is doubtful. Rows being sent are repaired too: a sender that claimed
+them before the step gives them back before its next attempt and sends them again
+(``QueueStore.stepped_since``); only a request already on the wire at the step goes out
+as it was, marked. Rows of earlier boots were stamped on another boot's clock.
 """
 
 from __future__ import annotations
@@ -24,7 +26,6 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.queue import leases
 from phytrace_edge.queue.clock import QueueTime, Step
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
@@ -73,15 +74,18 @@ def repaired(event: dict[str, Any], queued: tuple[float, float], step: Step) -> 
 
 
 def repair_queued(cursor: sqlite3.Cursor, codecs: Codecs, step: Step, boot_start: float) -> int:
-    """Repair the unleased rows of this boot queued up to the step; events changed."""
-    changed_events = 0
-    size_change = 0
-    columns = "id, count, queued_at, coalesce(newest_at, queued_at), codec, dict_id, body"
-    where = "AND queued_at >= ? AND queued_at <= ?"
-    # unleased() takes the condition as text; the bounds are floats of our own
-    condition = where.replace("?", "{}").format(repr(boot_start), repr(step.at))
-    for chunk in leases.unleased(cursor, step.at, columns, CHUNK_ROWS, condition):
-        for row_id, count, first, last, codec, dict_id, body in chunk.rows:
+    """Repair the rows of this boot queued up to the step, leased ones included (a
+    sender retrying them sends them again, ``stepped_since``); events changed. Reads
+    the rows by id, a chunk at a time: a step comes rarely, soon after a boot."""
+    changed_events = size_change = 0
+    last_id = 0
+    while rows := cursor.execute(
+        "SELECT id, count, queued_at, coalesce(newest_at, queued_at), codec, dict_id, body "
+        "FROM events WHERE id > ? AND queued_at BETWEEN ? AND ? ORDER BY id LIMIT ?",
+        (last_id, boot_start, step.at, CHUNK_ROWS),
+    ).fetchall():
+        last_id = rows[-1][0]
+        for row_id, count, first, last, codec, dict_id, body in rows:
             jsons = split_frame(codecs.decode(codec, dict_id, body), count)
             events = [orjson.loads(json) for json in jsons]
             fixed = [repaired(event, (first, last), step) for event in events]

@@ -164,13 +164,8 @@ class QueueStore:
         self._db.close()
         self._owner.close()
 
-    def wall(self) -> float:
-        """The wall clock as the store's clocks read it (a test's own clock is both)."""
-        return self.queue_time.clocks.read().wall if self.queue_time else self._clock()
-
     def now(self) -> float:
-        """The store's clock: queue time, which never steps with the wall clock (or a
-        test's own clock). Every time the queue stores is on it."""
+        """Queue time (``clock``), which never steps, or a test's own clock."""
         return self._clock()
 
     def __enter__(self) -> QueueStore:
@@ -276,6 +271,8 @@ class QueueStore:
         return self._claim(lease, (max_events, max_bytes))
 
     def _claim(self, lease: Callable[..., Any], limits: tuple[int, int]) -> Batch | None:
+        if self.queue_time and self.queue_time.stepped():  # repair before sending
+            self.record_clocks()
         now = self._clock()
         # each claim its own token: releasing a stale claim never frees a newer one
         token = f"{self._owner.token}:{next(self._claims)}"
@@ -285,7 +282,7 @@ class QueueStore:
         if not rows:
             return None
         events = decode_rows(self.codecs, rows)  # outside the lock: others go on
-        return Batch(tuple(ranges), token, events)
+        return Batch(tuple(ranges), token, events, now)
 
     def ack(
         self, batch: Batch, dead_letters: Sequence[DeadLetter] = (), exported: bool = False
@@ -344,6 +341,10 @@ class QueueStore:
         seconds (0.0 for none)."""
         return record_clocks(self._db, self.queue_time, self.codecs) if self.queue_time else 0.0
 
+    def stepped_since(self, at: float) -> bool:
+        """Whether the wall clock stepped after ``at`` (a batch's stamps were repaired)."""
+        return bool(self._db.read("SELECT 1 FROM clock_steps WHERE at > ? LIMIT 1", (at,)))
+
     def reclaim_space(self, force: bool = False) -> int:
         """Give free pages back to the file system (see ``maintenance``); bytes freed."""
         before = self.file_bytes()
@@ -389,9 +390,10 @@ class QueueStore:
 
     def stats(self) -> QueueStats:
         """What ``status`` shows about the queue (drops not yet written included)."""
+        now = self._clock()
+        wall = self.queue_time.clocks.now_wall() if self.queue_time else now  # for dates
         with self._db.lock:
             try:
-                now, wall = self._clock(), self.wall()
                 stats = stats_from(self._db.connection, str(self.path), now, wall - now)
             except sqlite3.Error as exc:
                 raise queue_error(exc, self.path) from exc

@@ -4,14 +4,15 @@
 builds the parts from them: the pipeline (source -> dispatcher -> builder -> sampler
 -> emit) for ``run``, ``run_simulation`` and the tests, the service around it, and the
 queue and sender that ``drain``, ``import`` and ``export`` use. These two modules
-are the only readers of ``Settings``.
+read ``Settings`` (with ``runtime/health.py``, which reads its own four thresholds so
+that ``status`` starts without every stage's options).
 
 The dependency rule of the package (checked by ``tests/unit/test_architecture.py``),
 each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
                              -> builder -> ingest -> sim
-    everything -> udm, units, redact, errors, _version
+    everything -> udm, units, redact, errors, _version, host_clock
 
 ``stub`` (the PhyCloud dev stub) stands apart: only the CLI starts it, and it uses only
 ``udm`` and ``errors``. No stage imports ``config`` or ``runtime``; the simulator

@@ -12,17 +12,16 @@ refusing an event as bad data dead-letters it:
   jitter between RETRY_MIN_S and RETRY_MAX_S, or Retry-After when the server says.
 - 401/403/415 and unexpected answers: keep the data, retry at RETRY_MAX_S, log ERROR.
 
-Full jitter is also what makes a fleet recover politely: after an outage each robot's
-next attempt falls at a random point of its backoff window, so PhyCloud does not get
-every robot's backlog in the same second.
+Full jitter spreads a fleet's retries after an outage (docs/phycloud-api.md).
 
 Batches are pipelined (docs/phycloud-api.md, "Batches"): the sender's thread claims
 and encodes the next batch while up to REQUESTS_IN_FLIGHT requests are on the wire,
 each in a thread of its own that retries, acks or releases its batch. Every batch
 has its own lease and idempotency key, so two in flight never hold the same event.
-A live batch is BATCH_SIZE events; when more than that is waiting, requests grow to
-BACKLOG_BATCH_SIZE events (or BATCH_MAX_BYTES of compressed body).
-A backlog drains in two lanes (``lanes``): the newest events first after an outage.
+A live batch is BATCH_SIZE events; when more wait, requests grow to BACKLOG_BATCH_SIZE
+events (or BATCH_MAX_BYTES of compressed body), in two lanes (``lanes``): the newest
+first after an outage. A batch claimed before a step of the wall clock goes back and
+is sent again with its stamps repaired (``Restamped``; queue/repair.py).
 """
 
 from __future__ import annotations
@@ -42,7 +41,6 @@ from phytrace_edge.errors import (
     EndpointRefusedError,
     QueueError,
     TransientSendError,
-    UnexpectedAnswerError,
 )
 from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
@@ -63,6 +61,10 @@ BEAT_S = 1.0
 # JSON claimed per byte of BATCH_MAX_BYTES when compressing: telemetry compresses 8-15x,
 # so a batch claimed at 4x still fits; one that does not is halved before it is sent
 JSON_PER_WIRE_BYTE = 4
+
+
+class Restamped(Exception):
+    """The wall clock stepped after the batch was claimed: send it again, repaired."""
 
 
 class Stopped(Exception):
@@ -246,6 +248,9 @@ class Sender:
             with contextlib.suppress(QueueError):  # it waited its turn: a fresh lease
                 self.store.renew(batch)
             dead = self._deliver(batch, batch.events, prepared)
+        except Restamped:
+            self.store.release(batch)
+            return 0
         except BaseException:  # stopped, or a failure the supervisor restarts us after
             with contextlib.suppress(QueueError):  # else the lease runs out by itself
                 self.store.release(batch)
@@ -322,6 +327,8 @@ class Sender:
             with attempt:
                 if self.stop.is_set():
                     raise Stopped
+                if self.store.stepped_since(batch.claimed_at):  # one indexed lookup
+                    raise Restamped
                 self._throttle.wait(len(body))
                 started = time.monotonic()
                 reply = self.transport.post_events(body, headers)
@@ -361,17 +368,8 @@ class Sender:
 
     def _before_retry(self, batch: Batch, state: RetryCallState) -> None:
         exc = state.outcome.exception() if state.outcome else None
-        status = getattr(exc, "status", None)
         self._lanes.failed(self.store.now())
-        self.stats.update(
-            add_retries=1,
-            last_error=str(exc),
-            last_error_class=SendStats.error_class(exc, status),
-            last_error_at=self._clock(),
-            last_status=status,
-            add_unexpected_answers=int(isinstance(exc, UnexpectedAnswerError)),
-            add_auth_failures=int(isinstance(exc, EndpointRefusedError) and status in (401, 403)),
-        )
+        self.stats.failed(exc, self._clock())
         if isinstance(exc, EndpointRefusedError):
             log.error(
                 "%s; keeping the queued events, retrying in %.0f s", exc, state.upcoming_sleep

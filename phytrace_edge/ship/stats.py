@@ -6,6 +6,8 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any
 
+from phytrace_edge.errors import EndpointRefusedError, UnexpectedAnswerError
+
 LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0)
 _INTERNAL = ("latency_buckets", "latency_count", "latency_sum_s", "lock")
 
@@ -57,6 +59,19 @@ class SendStats:
                 self.backfill_events_sent += events
             newest = self.newest_delivered_at
             self.newest_delivered_at = max(newest or newest_queued_at, newest_queued_at)
+
+    def failed(self, exc: BaseException | None, at: float) -> None:
+        """Count an attempt that failed and will be retried, and remember why."""
+        status = getattr(exc, "status", None)
+        self.update(
+            add_retries=1,
+            last_error=str(exc),
+            last_error_class=self.error_class(exc, status),
+            last_error_at=at,
+            last_status=status,
+            add_unexpected_answers=int(isinstance(exc, UnexpectedAnswerError)),
+            add_auth_failures=int(isinstance(exc, EndpointRefusedError) and status in (401, 403)),
+        )
 
     def observe_latency(self, seconds: float) -> None:
         """Count one request's duration into the cumulative histogram."""

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pytest
 
+from phytrace_edge.errors import QueueError
 from phytrace_edge.host_clock import synchronized
 from phytrace_edge.queue.inspect import QueueStats, read_stats
-from tests.processes import BridgeProcess, StubProcess, wait_for
+from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 
 Y2001 = 978_307_200  # 2001-01-01T00:00:00Z
-LEASED_MAX = 40  # events the live and backfill lanes may hold in requests at the step
 TWENTY_YEARS_S = 20 * 365 * 86_400
 
 SHIM = r"""
@@ -72,6 +72,60 @@ def unix(captured_at: str) -> float:
     return datetime.fromisoformat(captured_at.replace("Z", "+00:00")).timestamp()
 
 
+def faked_bridge(
+    env: dict[str, str], log: Path, queue: Path, endpoint: str, **extra: str
+) -> BridgeProcess:
+    """``phytrace-edge run --input sim`` on the faked clock, started."""
+    return BridgeProcess(
+        log,
+        **env,
+        **extra,
+        PHYCLOUD_ENDPOINT=endpoint,
+        QUEUE_PATH=str(queue),
+        BRIDGE_INPUT="sim",
+        SAMPLE_RATE_HZ="20",
+        FLUSH_INTERVAL_S="0.2",
+        BATCH_SIZE="10",
+        RETRY_MIN_S="0.1",
+        RETRY_MAX_S="1",
+        LOG_LEVEL="debug",
+    ).start()
+
+
+def stopped_and_counted(bridge: BridgeProcess, queue: Path, phycloud: StubProcess) -> QueueStats:
+    """Stop the bridge (SIGTERM); check every event queued was delivered exactly once or
+    still waits, and none was dropped; the final stats."""
+    bridge.signal(signal.SIGTERM)
+    assert bridge.wait(timeout=60) == 0
+    final = stats(queue)
+    sent = phycloud.stats()
+    assert final.drops == {}
+    assert final.queued_total == final.acked_total + final.depth
+    assert sent["unique"] == sent["received"] == final.acked_total  # each exactly once
+    return final
+
+
+def stamps_at(phycloud: StubProcess, stepped_at: float) -> tuple[list[dict], list[float]]:
+    """(the ``wall_clock`` of each event PhyCloud holds stamped before ``stepped_at``
+    and not repaired, the repaired ones' stamps); every repaired stamp must be after
+    it, and every unrepaired old one must say its clock was not synchronized."""
+    stamps = [(unix(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()]
+    old = [clock for at, clock in stamps if at < stepped_at - 3600]
+    corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
+    assert all(clock == {"synchronized": False} for clock in old), old[:3]
+    assert all(at > stepped_at - 3600 for at in corrected)
+    return old, corrected
+
+
+def queued(queue: Path) -> int:
+    """Events waiting; 0 while the service is still creating the queue."""
+    try:
+        found = read_stats(str(queue))
+    except QueueError:  # the file exists, its tables not yet
+        return 0
+    return 0 if found is None else found.depth
+
+
 def stats(queue: Path) -> QueueStats:
     found = read_stats(str(queue))
     assert found is not None
@@ -86,22 +140,9 @@ def test_a_step_from_2001_to_now_during_an_outage_loses_and_stalls_nothing(
     set_wall_clock(offset_file, Y2001)
     queue, log = tmp_path / "queue.db", tmp_path / "bridge.log"
     phycloud = StubProcess(tmp_path / "stub.db")  # its port chosen, not yet listening
-    bridge = BridgeProcess(
-        log,
-        **env,
-        PHYCLOUD_ENDPOINT=phycloud.endpoint,
-        QUEUE_PATH=str(queue),
-        BRIDGE_INPUT="sim",
-        SAMPLE_RATE_HZ="20",
-        FLUSH_INTERVAL_S="0.2",
-        BATCH_SIZE="10",
-        BACKLOG_BATCH_SIZE=str(LEASED_MAX // 2),  # what a retrying sender holds is not repaired
-        RETRY_MIN_S="0.1",
-        RETRY_MAX_S="1",
-        LOG_LEVEL="debug",
-    ).start()
+    bridge = faked_bridge(env, log, queue, phycloud.endpoint)
     try:
-        wait_for(lambda: queue.exists() and stats(queue).depth >= 100, 60, "events queued in 2001")
+        wait_for(lambda: queued(queue) >= 100, 60, "events queued in 2001")
         assert stats(queue).oldest_queued_at is not None
         passes_before = log.read_text().count("queue maintenance pass done")
         queued_before_step = stats(queue).queued_total
@@ -123,24 +164,52 @@ def test_a_step_from_2001_to_now_during_an_outage_loses_and_stalls_nothing(
 
         phycloud.start()  # PhyCloud is back
         wait_for(lambda: phycloud.stats()["received"] >= after_step.depth, 60, "the backlog sent")
-        bridge.signal(signal.SIGTERM)
-        assert bridge.wait(timeout=60) == 0
-        final = stats(queue)
-        sent = phycloud.stats()
-        assert final.drops == {}
-        assert final.queued_total == final.acked_total + final.depth
-        assert sent["unique"] == sent["received"] == final.acked_total  # each exactly once
+        stopped_and_counted(bridge, queue, phycloud)
         assert "expired" not in log.read_text()
         if synchronized() is not False:
             return  # only stamps the kernel calls unsynchronized are marked and repaired
-        stamps = [(unix(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()]
-        in_2001 = [clock for at, clock in stamps if at < started_at - 3600]
-        corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
-        # every event stamped in 2001 was repaired, unless a request held it at the step
-        assert all(clock == {"synchronized": False} for clock in in_2001), in_2001[:3]
-        assert len(in_2001) <= LEASED_MAX
-        assert len(corrected) >= queued_before_step - LEASED_MAX
-        assert all(at > started_at - 3600 for at in corrected)
+        in_2001, corrected = stamps_at(phycloud, started_at)
+        # PhyCloud was down at the step: no request got through, so all were repaired,
+        # those the sender held and retried included
+        assert in_2001 == []
+        assert len(corrected) >= queued_before_step
+    finally:
+        bridge.stop()
+        phycloud.stop()
+
+
+@pytest.mark.timeout(300)
+def test_a_step_forward_by_years_during_a_drain_sends_each_event_once(
+    tmp_path: Path, faked_clock: tuple[dict[str, str], Path]
+) -> None:
+    """The clock steps while a backlog drains through a slow PhyCloud: leases, the
+    lanes and the health checks keep going on queue time."""
+    env, offset_file = faked_clock
+    set_wall_clock(offset_file, Y2001)
+    queue, log = tmp_path / "queue.db", tmp_path / "bridge.log"
+    phycloud = StubProcess(tmp_path / "stub.db", "--latency", "0.2")
+    # small requests, so that most of the backlog still waits in the queue at the step
+    bridge = faked_bridge(env, log, queue, phycloud.endpoint, BACKLOG_BATCH_SIZE="20")
+    try:
+        wait_for(lambda: queued(queue) >= 200, 60, "a backlog in 2001")
+        phycloud.start()
+        wait_for(lambda: phycloud.stats()["received"] >= 20, 60, "the drain under way")
+        stepped_at = time.time()
+        set_wall_clock(offset_file, stepped_at)  # 25 years forward, mid-drain
+        wait_for(
+            lambda: (stats(queue).clock.last_step_s or 0) > TWENTY_YEARS_S, 30, "the step seen"
+        )
+        code, document = status_json(QUEUE_PATH=str(queue))
+        assert document["running"], document  # the heartbeat's age did not jump
+        assert code == 0, document["problems"]
+        wait_for(lambda: stats(queue).depth < 20, 90, "the backlog drained after the step")
+        final = stopped_and_counted(bridge, queue, phycloud)
+        assert final.acked_total > 200
+        if synchronized() is False:  # marked, so repaired: all but what was on the wire
+            in_2001, corrected = stamps_at(phycloud, stepped_at)
+            sent_before_step = 20 + 2 * 20 + 10  # seen sent, then two requests and a live one
+            assert len(in_2001) <= sent_before_step + 50  # + what went out until the step
+            assert len(corrected) >= 100
     finally:
         bridge.stop()
         phycloud.stop()

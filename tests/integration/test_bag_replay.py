@@ -14,13 +14,10 @@ import pytest
 
 from phytrace_edge import run_simulation
 from phytrace_edge.builder.assemble import DOMAINS
-from phytrace_edge.builder.builder import UDMBuilder
-from phytrace_edge.builder.options import BuilderOptions, Identity
-from phytrace_edge.config.parsers import KNOWN_TOPICS
+from phytrace_edge.config import Settings
 from phytrace_edge.errors import ConfigError
-from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.sources.bag import BagClock, replay
-from phytrace_edge.ingest.sources.base import Feed
+from phytrace_edge.ingest.sources.bag import BagSource, ReplaySummary
+from phytrace_edge.runtime import options, wiring
 from phytrace_edge.sim.recorder import CUSTOM_TOPIC, record_simulation
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env
@@ -37,21 +34,17 @@ def bag(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
     return path
 
 
-def replay_events(path: Path, rate: float = 0) -> tuple[list[dict], object]:
-    clock = BagClock()
-    builder = UDMBuilder(
-        BuilderOptions(Identity("delivery-robot-001", "delivery_robot"), stale_after_s=5.0),
-        clock=clock,
-    )
-    dispatcher = Dispatcher(builder.add_reading)
+def replay_events(path: Path, rate: float = 0) -> tuple[list[dict], ReplaySummary]:
+    """The periodic events of a replay through the pipeline ``run --input bag:`` uses."""
+    settings = Settings().replace(bridge_input=f"bag:{path}", replay_rate=rate, stale_after_s=5.0)
+    source = BagSource(options.source_options(settings, {}))
     events: list[dict] = []
-    feed = Feed(
-        dispatcher.on_message, lambda at: events.append(builder.build_event(captured_at_s=at)), 0.2
-    )
-    summary = replay(
-        str(path), {t: t for t in KNOWN_TOPICS}, {}, feed, clock, rate=rate, stop=threading.Event()
-    )
-    return events, summary
+    pipeline = wiring.build_pipeline(settings, source, lambda built: events.append(built.event))
+    pipeline.open()
+    pipeline.ingest(threading.Event(), lambda: None)
+    pipeline.close()
+    assert source.summary is not None
+    return [e for e in events if e["event_type"] == "telemetry.periodic"], source.summary
 
 
 def comparable(event: dict) -> dict:

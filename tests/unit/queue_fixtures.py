@@ -1,5 +1,6 @@
-"""What the queue's tests share: a settable clock, numbered events, and a store
-opener (the ``clock`` and ``open_store`` fixtures live in ``conftest.py``)."""
+"""What the queue's tests share: a settable clock, a machine whose wall clock steps,
+numbered and stamped events, and a store opener (the ``clock`` and ``open_store``
+fixtures live in ``conftest.py``)."""
 
 from __future__ import annotations
 
@@ -7,13 +8,65 @@ import contextlib
 import sqlite3
 import uuid
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import orjson
 
+from phytrace_edge.queue.clock import Instant
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
+
+Y2001 = 978_307_200.0  # 2001-01-01T00:00:00Z: where a Raspberry Pi without RTC starts
+NOW = 1_795_000_000.0  # late 2026
+
+
+@dataclass
+class Machine:
+    """A machine's clocks: a wall clock that steps, CLOCK_BOOTTIME that does not."""
+
+    wall: float
+    since_boot: float = 12.0
+    boot_id: str = "boot-1"
+    synchronized: bool = False
+
+    def read(self) -> Instant:
+        return Instant(self.wall, self.since_boot, self.boot_id, self.synchronized)
+
+    def now_since_boot(self) -> float:
+        return self.since_boot
+
+    def now_wall(self) -> float:
+        return self.wall
+
+    def run(self, seconds: float) -> None:
+        self.wall += seconds
+        self.since_boot += seconds
+
+    def reboot(self, wall: float, synchronized: bool) -> None:
+        """Off for a while (which only a true wall clock can tell), then up again 8 s
+        with the wall clock at ``wall``."""
+        self.boot_id = f"{self.boot_id}+"
+        self.since_boot = 8.0
+        self.wall = wall
+        self.synchronized = synchronized
+
+
+def stamped(n: int, machine: Machine) -> dict:
+    """An event as the builder stamps it on this machine's wall clock (marked when the
+    kernel calls the clock unsynchronized)."""
+    stamp = {**event(n), "captured_at": format_timestamp(machine.wall)}
+    if not machine.synchronized:
+        stamp["wall_clock"] = {"synchronized": False}
+    return stamp
+
+
+def put_stamped(store: QueueStore, machine: Machine, seqs_: range) -> None:
+    for n in seqs_:
+        machine.run(0.2)
+        store.put(stamped(n, machine))
 
 
 class Clock:

@@ -6,7 +6,6 @@ and no event is expired, no lease runs out, and no count moves because of it.
 from __future__ import annotations
 
 import ctypes
-from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
@@ -23,37 +22,10 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
-from tests.unit.queue_fixtures import event, seqs
+from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs
 
-Y2001 = 978_307_200.0  # 2001-01-01T00:00:00Z: where a Raspberry Pi without RTC starts
-NOW = 1_795_000_000.0  # late 2026
 DAY = 86_400.0
 TTL = QueueLimits(max_bytes=64 * MIB, ttl_s=7 * DAY)
-
-
-@dataclass
-class Machine:
-    """A machine's clocks: a wall clock that steps, CLOCK_BOOTTIME that does not."""
-
-    wall: float
-    since_boot: float = 12.0
-    boot_id: str = "boot-1"
-    synchronized: bool = False
-
-    def read(self) -> Instant:
-        return Instant(self.wall, self.since_boot, self.boot_id, self.synchronized)
-
-    def run(self, seconds: float) -> None:
-        self.wall += seconds
-        self.since_boot += seconds
-
-    def reboot(self, wall: float, synchronized: bool) -> None:
-        """Off for a while (which only a true wall clock can tell), then up again 8 s
-        with the wall clock at ``wall``."""
-        self.boot_id = f"{self.boot_id}+"
-        self.since_boot = 8.0
-        self.wall = wall
-        self.synchronized = synchronized
 
 
 def open_store(path: Path, machine: Machine) -> QueueStore:
@@ -221,21 +193,6 @@ def test_the_kernel_is_asked_whether_the_clock_is_synchronized() -> None:
     assert synchronized() is (None if state == -1 else state != 5)
 
 
-def stamped(n: int, machine: Machine) -> dict:
-    """An event as the builder stamps it on this machine's wall clock (marked when the
-    kernel calls the clock unsynchronized)."""
-    stamp = {**event(n), "captured_at": format_timestamp(machine.wall)}
-    if not machine.synchronized:
-        stamp["wall_clock"] = {"synchronized": False}
-    return stamp
-
-
-def put_stamped(store: QueueStore, machine: Machine, seqs_: range) -> None:
-    for n in seqs_:
-        machine.run(0.2)
-        store.put(stamped(n, machine))
-
-
 def claimed(store: QueueStore) -> dict[int, dict]:
     batch = store.claim_batch(1000, 64 * MIB)
     assert batch is not None
@@ -259,11 +216,10 @@ def test_stamps_queued_before_a_step_are_repaired(tmp_path: Path, step_s: float)
     assert store.record_clocks() == pytest.approx(step_s)
     store.release(sending)
 
+    assert store.stepped_since(sending.claimed_at)  # its sender gives it back
     events = claimed(store)
     assert sorted(events) == list(range(7))
-    unrepaired = events[0]  # it was leased: it goes out marked, as it was
-    assert unrepaired["wall_clock"] == {"synchronized": False}
-    for n in range(1, 5):
+    for n in range(5):  # the one being sent at the step too
         assert events[n]["wall_clock"]["corrected_by_s"] == pytest.approx(step_s, abs=1e-3)
         assert events[n]["wall_clock"]["synchronized"] is False
     stamped_at = {n: datetime.fromisoformat(e["captured_at"][:-1]) for n, e in events.items()}

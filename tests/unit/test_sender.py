@@ -26,6 +26,7 @@ from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import FunctionTransport, HttpTransport
 from phytrace_edge.units import MIB
 from tests.processes import wait_for
+from tests.unit.queue_fixtures import NOW, Y2001, Machine, put_stamped
 
 
 class FakeCloud:
@@ -390,3 +391,33 @@ def test_an_idle_sender_still_says_it_is_alive(store) -> None:
         s.stop.set()
         worker.join(timeout=10)
     assert len(beats) >= 3 and store.counter("depth") == 0
+
+
+def test_a_batch_retrying_across_a_clock_step_is_sent_again_repaired(tmp_path: Path) -> None:
+    """PhyCloud is down when the wall clock steps: the batch the sender holds was
+    repaired in the queue meanwhile, so it gives it back and sends the repaired one."""
+    machine = Machine(wall=Y2001)
+    with QueueStore.open(
+        tmp_path / "q.db",
+        limits=QueueLimits(max_bytes=64 * MIB),
+        clocks=machine,  # type: ignore[arg-type]
+    ) as store:
+        store.record_clocks()
+        put_stamped(store, machine, range(5))
+
+        def step_while_waiting(seconds: float) -> None:
+            if machine.wall < NOW:
+                machine.wall, machine.synchronized = NOW, True
+                machine.run(1.0)
+                store.record_clocks()
+
+        cloud = FakeCloud(503)
+        s = Sender(
+            store, FunctionTransport(cloud), SendPolicy(batch_size=10), sleep=step_while_waiting
+        )
+        assert s.drain() is True
+    delivered = list(cloud.stored.values())
+    assert len(delivered) == 5
+    assert all(e["captured_at"].startswith("2026-") for e in delivered)
+    assert all(e["wall_clock"]["corrected_by_s"] > 0 for e in delivered)
+    assert [e["captured_at"][:4] for e in cloud.requests[0][0]] == ["2001"] * 5  # the first try

@@ -197,7 +197,7 @@ class BagSource:
         reader.close()
         self.clock = BagClock()
         self._feed: Feed | None = None
-        self._summary: ReplaySummary | None = None
+        self.summary: ReplaySummary | None = None  # after run()
 
     def start(self, feed: Feed) -> None:
         self._feed = feed
@@ -206,7 +206,7 @@ class BagSource:
         """Replay the bag once; returns at its end (or at ``stop``)."""
         assert self._feed is not None, "start() first"
         options = self._options
-        self._summary = replay(
+        self.summary = replay(
             options.bag_path,
             options.topics,
             options.extra_topics,
@@ -216,7 +216,7 @@ class BagSource:
             stop,
             beat,
         )
-        log.info("%s", self._summary.describe())
+        log.info("%s", self.summary.describe())
 
     def field_types(self, msg: Any) -> Mapping[str, str]:
         return self._field_types(msg)
@@ -228,9 +228,9 @@ class BagSource:
         """The reader is closed by the replay itself."""
 
     def finished(self) -> Finished | None:
-        if self._summary is None:
+        if self.summary is None:
             return None
-        return Finished(self._summary.describe(), ok=self._summary.error is None)
+        return Finished(self.summary.describe(), ok=self.summary.error is None)
 
     def topic_stats(self) -> dict[str, dict[str, Any]]:
         return {}
