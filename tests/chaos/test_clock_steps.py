@@ -126,6 +126,11 @@ def queued(queue: Path) -> int:
     return 0 if found is None else found.depth
 
 
+def heartbeat_after(queue: Path, at: float) -> bool:
+    service = stats(queue).service
+    return service is not None and service.running and service.heartbeat_at > at
+
+
 def stats(queue: Path) -> QueueStats:
     found = read_stats(str(queue))
     assert found is not None
@@ -212,4 +217,42 @@ def test_a_step_forward_by_years_during_a_drain_sends_each_event_once(
             assert len(corrected) >= 100
     finally:
         bridge.stop()
+        phycloud.stop()
+
+
+@pytest.mark.parametrize(
+    "first_in_2001", [True, False], ids=["wrong-then-right", "right-then-wrong"]
+)
+def test_a_restart_onto_another_clock_keeps_ages_and_sends_each_event_once(
+    tmp_path: Path, faked_clock: tuple[dict[str, str], Path], first_in_2001: bool
+) -> None:
+    """The queue is written under one wall clock and the next start (same boot: queue
+    time goes on from the boot's base; across boots, tests/unit/test_queue_clock.py)
+    has the other: its events are as old as the bridge was seen running, never years
+    or less than nothing, and each reaches PhyCloud once."""
+    env, offset_file = faked_clock
+    set_wall_clock(offset_file, Y2001)
+    queue, log = tmp_path / "queue.db", tmp_path / "bridge.log"
+    phycloud = StubProcess(tmp_path / "stub.db")
+    first = faked_bridge(env if first_in_2001 else {}, log, queue, phycloud.endpoint)
+    second = None
+    try:
+        wait_for(lambda: queued(queue) >= 50, 60, "events queued by the first start")
+        first.signal(signal.SIGTERM)
+        assert first.wait(timeout=60) == 0
+        stopped_at = stats(queue).read_at
+        second_env = {} if first_in_2001 else env
+        second = faked_bridge(second_env, log, queue, phycloud.endpoint)
+        wait_for(lambda: heartbeat_after(queue, stopped_at), 60, "the second start's heartbeat")
+        # as the second start's clock sees it
+        _, document = status_json(QUEUE_PATH=str(queue), **second_env)
+        assert document["drops"] == {}
+        assert 0 <= document["queue"]["oldest_age_s"] < 600  # minutes, not years
+        phycloud.start()
+        wait_for(lambda: stats(queue).acked_total >= 50, 60, "the first start's events sent")
+        stopped_and_counted(second, queue, phycloud)
+    finally:
+        first.stop()
+        if second is not None:
+            second.stop()
         phycloud.stop()
