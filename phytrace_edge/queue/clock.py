@@ -74,13 +74,14 @@ class SystemClocks:
     def now_wall(self) -> float:
         return time.time()
 
-    def read(self) -> Instant:
-        """All of it, the kernel's word on synchronization included (a system call)."""
+    def read(self, ask_kernel: bool = True) -> Instant:
+        """All of it, the kernel's word on synchronization included (a system call);
+        without ``ask_kernel``, taken as not synchronized (no time off counted)."""
         return Instant(
-            time.time(),
-            time.clock_gettime(time.CLOCK_BOOTTIME),
+            self.now_wall(),
+            self.now_since_boot(),
             boot_id(),
-            synchronized() is True,  # "will not say" counts no time off across a reboot
+            ask_kernel and synchronized() is True,  # "will not say" counts no time off
         )
 
 
@@ -100,9 +101,8 @@ def boot_base(now: Instant, last: LastSeen | None) -> float:
 class QueueTime:
     """Queue time for one process: ``now()`` is CLOCK_BOOTTIME plus this boot's base."""
 
-    def __init__(self, base: float, boot_id: str, clocks: SystemClocks) -> None:
+    def __init__(self, base: float, clocks: SystemClocks) -> None:
         self.base = base
-        self.boot_id = boot_id
         self.clocks = clocks
         self._last_look: tuple[float, float] | None = None  # (queue time, wall offset)
 
@@ -150,7 +150,7 @@ def _open(cursor: sqlite3.Cursor, clocks: SystemClocks) -> QueueTime:
         cursor.execute("INSERT INTO clock(boot_id, base) VALUES (?, ?)", (now.boot_id, base))
     else:
         base = float(row[0])
-    queue_time = QueueTime(base, now.boot_id, clocks)
+    queue_time = QueueTime(base, clocks)
     record_moment(cursor, queue_time, now)
     return queue_time
 
@@ -196,9 +196,7 @@ def last_seen(cursor: sqlite3.Cursor) -> LastSeen | None:
 def queue_time_now(connection: sqlite3.Connection) -> float:
     """Queue time now, read without writing (``status``): this boot's base when a
     process stored one, else what the next open would choose with no time off."""
-    now = Instant(
-        time.time(), time.clock_gettime(time.CLOCK_BOOTTIME), boot_id(), synchronized=False
-    )
+    now = SystemClocks().read(ask_kernel=False)  # no ctypes at status's start
     cursor = connection.cursor()
     tables = {name for (name,) in cursor.execute("SELECT name FROM sqlite_master")}
     if "clock" not in tables:  # a queue from before queue time: it was the wall clock

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import logging
 import sqlite3
-from datetime import datetime
 from typing import Any
 
 import orjson
@@ -30,16 +29,12 @@ from phytrace_edge.queue.clock import QueueTime, Step
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.frames import split_frame
-from phytrace_edge.udm.event import format_timestamp
+from phytrace_edge.udm.event import format_timestamp, parse_timestamp
 
 log = logging.getLogger(__name__)
 
 STAMP_LATENCY_S = 2.0  # from the builder's stamp to the put: a tick and a commit
 CHUNK_ROWS = 256
-
-
-def _unix(captured_at: str) -> float:
-    return datetime.fromisoformat(captured_at.replace("Z", "+00:00")).timestamp()
 
 
 def stamped_before(captured_s: float, queued: tuple[float, float], step: Step) -> bool:
@@ -63,7 +58,7 @@ def repaired(event: dict[str, Any], queued: tuple[float, float], step: Step) -> 
     if not isinstance(captured, str):
         return False
     try:
-        captured_s = _unix(captured)
+        captured_s = parse_timestamp(captured)
     except ValueError:
         return False
     if not stamped_before(captured_s, queued, step):

@@ -10,10 +10,11 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from datetime import datetime
 from typing import Any
 
 import orjson
+
+from phytrace_edge.udm.event import parse_timestamp
 
 SERIES_SECONDS = 300.0
 SERIES_POINTS = 600
@@ -129,7 +130,7 @@ def _captured_at(event: dict[str, Any]) -> float | None:
 
 def _seconds(stamp: Any) -> float | None:
     try:
-        return datetime.fromisoformat(str(stamp).replace("Z", "+00:00")).timestamp()
+        return parse_timestamp(str(stamp))
     except ValueError:
         return None
 

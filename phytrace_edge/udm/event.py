@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from datetime import datetime
 
 
 def new_event_id(unix_ms: int | None = None) -> str:
@@ -18,6 +19,12 @@ def new_event_id(unix_ms: int | None = None) -> str:
     value = value & ~(0x3 << 62) | 0x2 << 62  # RFC 4122 variant
     text = f"{value:032x}"
     return f"{text[:8]}-{text[8:12]}-{text[12:16]}-{text[16:20]}-{text[20:]}"
+
+
+def parse_timestamp(text: str) -> float:
+    """Unix seconds of an ISO-8601 timestamp (``format_timestamp``'s or with an offset);
+    ValueError for anything else."""
+    return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
 
 
 def format_timestamp(unix_s: float) -> str:

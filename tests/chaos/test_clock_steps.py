@@ -11,7 +11,6 @@ import shutil
 import signal
 import subprocess
 import time
-from datetime import datetime
 from pathlib import Path
 
 import pytest
@@ -19,6 +18,7 @@ import pytest
 from phytrace_edge.errors import QueueError
 from phytrace_edge.host_clock import synchronized
 from phytrace_edge.queue.inspect import QueueStats, read_stats
+from phytrace_edge.udm.event import parse_timestamp
 from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 
 Y2001 = 978_307_200  # 2001-01-01T00:00:00Z
@@ -68,10 +68,6 @@ def set_wall_clock(offset_file: Path, unix_s: float) -> None:
     offset_file.write_text(f"{round(unix_s - time.time()):+d}\n")
 
 
-def unix(captured_at: str) -> float:
-    return datetime.fromisoformat(captured_at.replace("Z", "+00:00")).timestamp()
-
-
 def faked_bridge(
     env: dict[str, str], log: Path, queue: Path, endpoint: str, **extra: str
 ) -> BridgeProcess:
@@ -109,7 +105,9 @@ def stamps_at(phycloud: StubProcess, stepped_at: float) -> tuple[list[dict], lis
     """(the ``wall_clock`` of each event PhyCloud holds stamped before ``stepped_at``
     and not repaired, the repaired ones' stamps); every repaired stamp must be after
     it, and every unrepaired old one must say its clock was not synchronized."""
-    stamps = [(unix(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()]
+    stamps = [
+        (parse_timestamp(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()
+    ]
     old = [clock for at, clock in stamps if at < stepped_at - 3600]
     corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
     assert all(clock == {"synchronized": False} for clock in old), old[:3]

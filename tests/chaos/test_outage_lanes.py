@@ -18,7 +18,6 @@ import contextlib
 import itertools
 import sqlite3
 import time
-from datetime import datetime
 from pathlib import Path
 
 import httpx
@@ -28,14 +27,11 @@ from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime.options import queue_path
 from phytrace_edge.runtime.wiring import build_service
+from phytrace_edge.udm.event import parse_timestamp
 from tests.processes import wait_for
 
 RATE_HZ = 50
 OUTAGE_EVENTS = 2000  # 40 s of robot time
-
-
-def unix(captured_at: str) -> float:
-    return datetime.fromisoformat(captured_at.replace("Z", "+00:00")).timestamp()
 
 
 def stub_events(endpoint: str) -> list[dict]:
@@ -107,7 +103,9 @@ def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinne
 
     events = stub_events(stub.endpoint)
     after_restart = events[received_before:]
-    first_live = next(i for i, e in enumerate(after_restart) if unix(e["captured_at"]) >= back_at)
+    first_live = next(
+        i for i, e in enumerate(after_restart) if parse_timestamp(e["captured_at"]) >= back_at
+    )
     assert first_live <= 100, "the present came ahead of the 40 s backlog"
 
     delivered = {e["event_id"] for e in events}
@@ -123,10 +121,10 @@ def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinne
         assert after.get("from") == before["to"], "a transition is missing"
 
     def in_the_outage(e: dict) -> bool:
-        return killed_at <= unix(e["captured_at"]) <= back_at
+        return killed_at <= parse_timestamp(e["captured_at"]) <= back_at
 
-    during = sorted(unix(e["captured_at"]) for e in events if in_the_outage(e))
-    first_built = min(unix(e["captured_at"]) for e in built if in_the_outage(e))
+    during = sorted(parse_timestamp(e["captured_at"]) for e in events if in_the_outage(e))
+    first_built = min(parse_timestamp(e["captured_at"]) for e in built if in_the_outage(e))
     assert during[0] == first_built, "the history reaches back to the outage's start"
     largest_gap = max(b - a for a, b in itertools.pairwise(during))
     assert largest_gap <= 2 * coarsest / RATE_HZ + 0.5, "no coarser than status reported"
