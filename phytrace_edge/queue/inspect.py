@@ -122,6 +122,19 @@ def stats_from(
     """Read the stats through ``connection`` (the caller holds any lock it needs) at
     ``now`` (queue time), ``wall_offset`` being the wall clock minus queue time."""
     tables = {name for (name,) in connection.execute("SELECT name FROM sqlite_master")}
+    if not tables:  # made, then a power cut before its first commit: what run opens empty
+        return QueueStats(
+            path=str(path),
+            counters={},
+            oldest_queued_at=None,
+            newest_queued_at=None,
+            file_bytes=file_bytes(path),
+            quarantined=None,
+            leased=0,
+            damaged=_damage_found(path),
+            clock=ClockState(wall_offset, None, None, None),
+            read_at=now,
+        )
     if "counters" not in tables:
         raise QueueError(f"queue {path}: not a phytrace-edge queue - check QUEUE_PATH")
     counters = {

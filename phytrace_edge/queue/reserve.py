@@ -16,6 +16,7 @@ import logging
 import os
 from pathlib import Path
 
+from phytrace_edge.durable import sync_folder
 from phytrace_edge.units import format_bytes
 
 log = logging.getLogger(__name__)
@@ -38,26 +39,35 @@ class SpaceReserve:
         return cls(queue_path, max(MIN_RESERVE_BYTES, min(at_most, share)))
 
     def held(self) -> bool:
-        return self.path.exists()
+        """Whether the reserve is there at its full size: a power cut right after it
+        was made can leave the file empty, which holds nothing."""
+        try:
+            return self.path.stat().st_size >= self.size
+        except FileNotFoundError:
+            return False
 
     def restore(self) -> bool:
-        """Make the reserve when it is missing and the disk has room for it twice."""
+        """Make the reserve when it is missing or short and the disk has room for it
+        twice; it is synced, file and folder, so that a power cut keeps it."""
         if self.held():
             return True
         free = os.statvfs(self.path.parent)
         if free.f_bavail * free.f_frsize < 2 * self.size:
             return False
+        self.path.unlink(missing_ok=True)  # a short one, left by a power cut
         try:
             descriptor = os.open(self.path, os.O_CREAT | os.O_WRONLY | os.O_EXCL, 0o600)
         except FileExistsError:
             return True
         try:
             os.posix_fallocate(descriptor, 0, self.size)  # real blocks, not a sparse file
+            os.fsync(descriptor)
         except OSError:
             os.close(descriptor)
             self.path.unlink()
             return False
         os.close(descriptor)
+        sync_folder(self.path.parent)
         return True
 
     def release(self) -> bool:

@@ -12,7 +12,7 @@ each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
                              -> builder -> ingest -> sim
-    everything -> udm, units, redact, errors, _version, host_clock
+    everything -> udm, units, redact, errors, _version, host_clock, durable
 
 ``stub`` (the PhyCloud dev stub) stands apart: only the CLI starts it, and it uses only
 ``udm`` and ``errors``. No stage imports ``config`` or ``runtime``; the simulator

@@ -28,6 +28,7 @@ import orjson
 import zstandard
 
 from phytrace_edge._version import __version__
+from phytrace_edge.durable import sync_folder
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 
@@ -109,7 +110,7 @@ class ExportWriter:
         os.fsync(self._raw.fileno())
         self._raw.close()
         self.part.replace(self.path)
-        _fsync_directory(self.path.parent)
+        sync_folder(self.path.parent)
         return self.manifest
 
     def abort(self) -> None:
@@ -124,14 +125,6 @@ def _captured_at(event_json: bytes) -> str | None:
     except (orjson.JSONDecodeError, AttributeError):
         return None
     return value if isinstance(value, str) else None
-
-
-def _fsync_directory(directory: Path) -> None:
-    fd = os.open(directory, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 @dataclass

@@ -18,7 +18,7 @@ from functools import cache
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "phytrace_edge"
-BASE = {"udm", "units", "redact", "errors", "_version", "host_clock"}
+BASE = {"udm", "units", "redact", "errors", "_version", "host_clock", "durable"}
 MODULE_STRING = re.compile(r"^phytrace_edge(\.[a-z_0-9]+)+(:\w+)?$")
 
 # The dependency rule of runtime/wiring.py's docstring: each component may import the
@@ -40,6 +40,7 @@ DECLARED: dict[str, set[str]] = {
     "errors": set(),
     "_version": set(),
     "host_clock": set(),
+    "durable": set(),
     "launch": set(),
 }
 
