@@ -167,8 +167,9 @@ class StubProcess:
 class BridgeProcess:
     """``phytrace-edge run`` with settings from the environment."""
 
-    def __init__(self, log: Path, **env: str) -> None:
-        self.env, self.log = env, log
+    def __init__(self, log: Path, *, preexec: Callable[[], None] | None = None, **env: str) -> None:
+        """``preexec`` runs in the child before exec (a namespace to enter)."""
+        self.env, self.log, self.preexec = env, log, preexec
         self.process: subprocess.Popen[bytes] | None = None
 
     def start(self) -> BridgeProcess:
@@ -178,6 +179,7 @@ class BridgeProcess:
                 stdout=log,
                 stderr=log,
                 env=python_env(**self.env),
+                preexec_fn=self.preexec,
             )
         return self
 

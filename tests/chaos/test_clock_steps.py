@@ -7,138 +7,28 @@ real stub process, down and then up on the same port."""
 
 from __future__ import annotations
 
-import shutil
 import signal
-import subprocess
 import time
 from pathlib import Path
 
 import pytest
 
-from phytrace_edge.errors import QueueError
 from phytrace_edge.host_clock import synchronized
-from phytrace_edge.queue.inspect import QueueStats, read_stats
 from phytrace_edge.udm.event import parse_timestamp
-from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
-
-Y2001 = 978_307_200  # 2001-01-01T00:00:00Z
-TWENTY_YEARS_S = 20 * 365 * 86_400
-
-SHIM = r"""
-#define _GNU_SOURCE
-#include <dlfcn.h>
-#include <errno.h>
-#include <time.h>
-#include <unistd.h>
-#include <sys/syscall.h>
-
-/* monotonic sleeps straight to the kernel; the others to libfaketime */
-int clock_nanosleep(clockid_t id, int flags, const struct timespec *t, struct timespec *rem) {
-    if (id == CLOCK_MONOTONIC || id == CLOCK_BOOTTIME)
-        return syscall(SYS_clock_nanosleep, id, flags, t, rem) == -1 ? errno : 0;
-    int (*next)(clockid_t, int, const struct timespec *, struct timespec *) =
-        dlsym(RTLD_NEXT, "clock_nanosleep");
-    return next(id, flags, t, rem);
-}
-"""
-
-
-@pytest.fixture
-def faked_clock(tmp_path: Path) -> tuple[dict[str, str], Path]:
-    """(the environment that fakes a process's wall clock, the file that sets it)."""
-    libraries = [str(p) for p in Path("/usr/lib").glob("*/faketime/libfaketime.so.1")]
-    if not libraries or not shutil.which("gcc"):
-        pytest.skip("needs libfaketime (Debian: faketime) and gcc; .ci/run installs them")
-    shim = tmp_path / "monotonic_sleep.so"
-    source = tmp_path / "monotonic_sleep.c"
-    source.write_text(SHIM)
-    subprocess.run(["gcc", "-shared", "-fPIC", "-o", shim, source, "-ldl"], check=True)
-    offset = tmp_path / "faketime"
-    env = {
-        "LD_PRELOAD": f"{shim}:{libraries[0]}",
-        "FAKETIME_TIMESTAMP_FILE": str(offset),
-        "FAKETIME_NO_CACHE": "1",
-        "FAKETIME_DONT_FAKE_MONOTONIC": "1",
-    }
-    return env, offset
-
-
-def set_wall_clock(offset_file: Path, unix_s: float) -> None:
-    """Step the faked wall clock to ``unix_s`` (an offset from the real one)."""
-    offset_file.write_text(f"{round(unix_s - time.time()):+d}\n")
-
-
-def faked_bridge(
-    env: dict[str, str], log: Path, queue: Path, endpoint: str, **extra: str
-) -> BridgeProcess:
-    """``phytrace-edge run --input sim`` on the faked clock, started."""
-    return BridgeProcess(
-        log,
-        **env,
-        **extra,
-        PHYCLOUD_ENDPOINT=endpoint,
-        QUEUE_PATH=str(queue),
-        BRIDGE_INPUT="sim",
-        SAMPLE_RATE_HZ="20",
-        FLUSH_INTERVAL_S="0.2",
-        BATCH_SIZE="10",
-        RETRY_MIN_S="0.1",
-        RETRY_MAX_S="1",
-        LOG_LEVEL="debug",
-    ).start()
-
-
-def stopped_and_counted(bridge: BridgeProcess, queue: Path, phycloud: StubProcess) -> QueueStats:
-    """Stop the bridge (SIGTERM); check every event queued was delivered exactly once or
-    still waits, and none was dropped; the final stats."""
-    bridge.signal(signal.SIGTERM)
-    assert bridge.wait(timeout=60) == 0
-    final = stats(queue)
-    sent = phycloud.stats()
-    assert final.drops == {}
-    assert final.queued_total == final.acked_total + final.depth
-    assert sent["unique"] == sent["received"] == final.acked_total  # each exactly once
-    return final
-
-
-def stamps_at(phycloud: StubProcess, stepped_at: float) -> tuple[list[dict], list[float]]:
-    """(the ``wall_clock`` of each event PhyCloud holds stamped before ``stepped_at``
-    and not repaired, the repaired ones' stamps); every repaired stamp must be after
-    it, and every unrepaired old one must say its clock was not synchronized."""
-    stamps = [
-        (parse_timestamp(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()
-    ]
-    old = [clock for at, clock in stamps if at < stepped_at - 3600]
-    corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
-    assert all(clock == {"synchronized": False} for clock in old), old[:3]
-    assert all(at > stepped_at - 3600 for at in corrected)
-    return old, corrected
-
-
-def queued(queue: Path) -> int:
-    """Events waiting; 0 while the service is still creating the queue."""
-    try:
-        found = read_stats(str(queue))
-    except QueueError:  # the file exists, its tables not yet
-        return 0
-    return 0 if found is None else found.depth
-
-
-def queued_up_to(queue: Path, queue_time: float) -> bool:
-    """Whether a row queued at or before ``queue_time`` still waits."""
-    oldest = stats(queue).oldest_queued_at
-    return oldest is not None and oldest <= queue_time
-
-
-def heartbeat_after(queue: Path, at: float) -> bool:
-    service = stats(queue).service
-    return service is not None and service.running and service.heartbeat_at > at
-
-
-def stats(queue: Path) -> QueueStats:
-    found = read_stats(str(queue))
-    assert found is not None
-    return found
+from tests.chaos.machine_time import (
+    DAY_S,
+    TWENTY_YEARS_S,
+    Y2001,
+    faked_bridge,
+    heartbeat_after,
+    queued,
+    queued_up_to,
+    set_wall_clock,
+    stamps_at,
+    stats,
+    stopped_and_counted,
+)
+from tests.processes import StubProcess, status_json, wait_for
 
 
 @pytest.mark.timeout(300)  # waits for the service's minute-long maintenance pass
@@ -220,6 +110,39 @@ def test_a_step_forward_by_years_during_a_drain_sends_each_event_once(
             sent_before_step = 20 + 2 * 20 + 10  # seen sent, then two requests and a live one
             assert len(in_2001) <= sent_before_step + 50  # + what went out until the step
             assert len(corrected) >= 100
+    finally:
+        bridge.stop()
+        phycloud.stop()
+
+
+@pytest.mark.timeout(180)
+def test_a_step_back_by_a_day_during_an_outage_stalls_nothing(
+    tmp_path: Path, faked_clock: tuple[dict[str, str], Path]
+) -> None:
+    """The clock was a day ahead and steps back while PhyCloud is down: a lease or a
+    schedule kept on the wall clock would now wait a day; the backlog must go at once."""
+    env, offset_file = faked_clock
+    set_wall_clock(offset_file, time.time() + DAY_S)
+    queue, log = tmp_path / "queue.db", tmp_path / "bridge.log"
+    phycloud = StubProcess(tmp_path / "stub.db")
+    bridge = faked_bridge(env, log, queue, phycloud.endpoint)
+    try:
+        wait_for(lambda: queued(queue) >= 100, 60, "events queued a day ahead")
+        before_step = stats(queue)
+        stepped_at = time.time()
+        set_wall_clock(offset_file, stepped_at)  # back by a day
+        wait_for(lambda: (stats(queue).clock.last_step_s or 0) < -DAY_S + 60, 30, "the step seen")
+        assert stats(queue).drops == {}
+        phycloud.start()
+        wait_for(lambda: not queued_up_to(queue, before_step.read_at), 60, "the backlog sent")
+        stopped_and_counted(bridge, queue, phycloud)
+        if synchronized() is not False:
+            return
+        stamps = [(parse_timestamp(e["captured_at"]), e["wall_clock"]) for e in phycloud.events()]
+        ahead = [clock for at, clock in stamps if at > time.time() + 3600]
+        corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
+        assert ahead == []  # none left a day in the future
+        assert len(corrected) >= before_step.queued_total
     finally:
         bridge.stop()
         phycloud.stop()
