@@ -38,18 +38,16 @@ def export_backlog(
     """Write the oldest queued events to ``path`` (at most about ``max_bytes``), verify
     the file and delete them from the queue; the file's manifest, or None when the
     queue had nothing to export (no file is written then)."""
-    writer = ExportWriter(path, source_id, store.now())
-    batches: list[Batch] = []
-    try:
-        _fill(store, writer, batches, max_bytes, progress)
-        if not batches:
-            writer.abort()
+    while True:
+        written = _write(store, path, source_id, max_bytes, progress)
+        if written is None:
             return None
-        manifest = writer.finish()
-    except BaseException:
-        writer.abort()
+        manifest, batches = written
+        if not store.stepped_since(batches[0].claimed_at):
+            break
+        # the wall clock stepped while the file was written: the queue has repaired the
+        # stamps of the events written before it (queue/repair.py), so write them again
         _release(store, batches)
-        raise
     try:
         _verify(path, [event.event_id for batch in batches for event in batch.events])
     except BaseException:
@@ -58,6 +56,29 @@ def export_backlog(
     for batch in batches:
         store.ack(batch, exported=True)
     return manifest
+
+
+def _write(
+    store: QueueStore,
+    path: Path,
+    source_id: str,
+    max_bytes: int,
+    progress: Callable[[int], None],
+) -> tuple[Manifest, list[Batch]] | None:
+    """Claim the oldest events and write them to ``path``: (the manifest, the batches
+    held), or None when the queue had none."""
+    writer = ExportWriter(path, source_id, store.now())
+    batches: list[Batch] = []
+    try:
+        _fill(store, writer, batches, max_bytes, progress)
+        if not batches:
+            writer.abort()
+            return None
+        return writer.finish(), batches
+    except BaseException:
+        writer.abort()
+        _release(store, batches)
+        raise
 
 
 def _fill(

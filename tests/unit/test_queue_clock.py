@@ -20,6 +20,8 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.repair import stamped_before
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import Thresholds, report
+from phytrace_edge.ship.export import export_backlog
+from phytrace_edge.ship.handcarry import open_export
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs
@@ -311,4 +313,26 @@ def test_stamps_after_the_step_on_a_still_unsynchronized_clock_are_left(tmp_path
         False,
     ]
     assert all(e["captured_at"].startswith("2026-") for e in events.values())
+    store.close()
+
+
+def test_an_export_under_way_at_a_step_writes_the_repaired_stamps(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()
+    put_stamped(store, machine, range(700))  # two batches of an export
+
+    def step_after_the_first_batch(events: int) -> None:
+        if machine.wall < NOW:
+            machine.wall += NOW - Y2001  # NTP, while the file is being written
+            machine.run(1.0)
+
+    path = tmp_path / "robot.phx"
+    manifest = export_backlog(store, path, "robot-1", 64 * MIB, step_after_the_first_batch)
+    assert manifest is not None
+    written = list(open_export(path).events())
+    assert sorted(e["seq"] for e in written) == list(range(700))
+    assert all(e["captured_at"].startswith("2026-") for e in written)
+    assert all("corrected_by_s" in e["wall_clock"] for e in written)
+    assert store.stats().depth == 0
     store.close()
