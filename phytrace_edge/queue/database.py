@@ -82,6 +82,13 @@ class Database:
             self.read("PRAGMA wal_checkpoint(TRUNCATE)")
         return True
 
+    def size_wal(self, limit: int) -> None:
+        """Keep the WAL near ``limit`` bytes, and checkpoint often enough that moving it
+        into the database never needs more room than the full-disk reserve holds."""
+        self.execute(f"PRAGMA journal_size_limit = {limit}")
+        room = min(limit, self.reserve.size if self.reserve else limit)
+        self.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // self.page_size // 2)}")
+
     def bound_wal(self, limit: int) -> None:
         """Truncate the WAL once it outgrows ``limit`` bytes. (SQLite's autocheckpoint
         copies pages back but leaves the WAL file at its largest.)"""

@@ -58,7 +58,12 @@ class FullDisk:
         except QueueError:
             return False
 
-    def count_refused(self, count: int) -> None:
+    def refused(self, path: Path, count: int) -> None:
+        """New events dropped at once: counted (``_count``) and logged (``_report``)."""
+        self._count(count)
+        self._report(path, count)
+
+    def _count(self, count: int) -> None:
         """Count events put and dropped at once: in the database if a transaction still
         fits, else in memory until one does."""
         counts = {"drop:disk_full": count, "queued_total": count}
@@ -68,7 +73,7 @@ class FullDisk:
         except QueueError:
             self._db.defer_counts(**counts)
 
-    def report_refused(self, path: Path, count: int) -> None:
+    def _report(self, path: Path, count: int) -> None:
         """Log refused events once a minute, not per event."""
         self._refused_since_report += count
         if time.monotonic() < self._next_report:

@@ -15,17 +15,25 @@ tell that its time is doubtful. Rows being sent are repaired too: a sender that 
 them before the step gives them back before its next attempt and sends them again
 (``QueueStore.stepped_since``); only a request already on the wire at the step goes out
 as it was, marked. Rows of earlier boots were stamped on another boot's clock.
+
+A day's backlog takes seconds to rewrite (10 s for 432,000 events here), so the repair
+goes a chunk of rows per transaction, half a second per look at the clocks, and the
+rows still to be repaired are held under a lease of the repairing process meanwhile:
+no sender claims them, no cap or TTL drops them. The repair under way is kept in
+``meta``; a process that opens the queue after a crash goes on with it.
 """
 
 from __future__ import annotations
 
 import logging
 import sqlite3
-from typing import Any
+import time
+from typing import Any, NamedTuple
 
 import orjson
 
-from phytrace_edge.queue.clock import QueueTime, Step
+from phytrace_edge.queue import leases
+from phytrace_edge.queue.clock import Step, SystemClocks, open_queue_time
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, bump_counters
 from phytrace_edge.queue.frames import split_frame
@@ -34,7 +42,9 @@ from phytrace_edge.udm.event import format_timestamp, parse_timestamp
 log = logging.getLogger(__name__)
 
 STAMP_LATENCY_S = 2.0  # from the builder's stamp to the put: a tick and a commit
-CHUNK_ROWS = 256
+CHUNK_ROWS = 16  # a transaction: up to 16 frames of 100 events, some 40 ms
+REPAIR_BUDGET_S = 0.5  # of repairing per look at the clocks (the heartbeat's, every 2 s)
+REPAIR_KEY = "clock_repair"
 
 
 def stamped_before(captured_s: float, queued: tuple[float, float], step: Step) -> bool:
@@ -68,55 +78,195 @@ def repaired(event: dict[str, Any], queued: tuple[float, float], step: Step) -> 
     return True
 
 
-def repair_queued(cursor: sqlite3.Cursor, codecs: Codecs, step: Step, boot_start: float) -> int:
-    """Repair the rows of this boot queued up to the step, leased ones included (a
-    sender retrying them sends them again, ``stepped_since``); events changed. Reads
-    the rows by id, a chunk at a time: a step comes rarely, soon after a boot."""
-    changed_events = size_change = 0
-    last_id = 0
-    while rows := cursor.execute(
-        "SELECT id, count, queued_at, coalesce(newest_at, queued_at), codec, dict_id, body "
-        "FROM events WHERE id > ? AND queued_at BETWEEN ? AND ? ORDER BY id LIMIT ?",
-        (last_id, boot_start, step.at, CHUNK_ROWS),
-    ).fetchall():
-        last_id = rows[-1][0]
-        for row_id, count, first, last, codec, dict_id, body in rows:
-            jsons = split_frame(codecs.decode(codec, dict_id, body), count)
-            events = [orjson.loads(json) for json in jsons]
-            fixed = [repaired(event, (first, last), step) for event in events]
-            if not any(fixed):
-                continue
-            changed_events += sum(fixed)
-            jsons = [orjson.dumps(event) for event in events]
-            encoded = codecs.encode(b"\n".join(jsons))
-            size_change += len(encoded.body) - len(body)
-            cursor.execute(
-                "UPDATE events SET codec = ?, dict_id = ?, json_size = ?, body = ? WHERE id = ?",
-                (encoded.codec, encoded.dict_id, sum(map(len, jsons)), encoded.body, row_id),
+Ids = tuple[int, int]  # a range of row ids, both ends included
+
+
+class Repair(NamedTuple):
+    """A repair under way: the rows within ``ranges`` queued between ``boot_start``
+    and the step are still to be looked at. Kept in ``meta`` (a restart goes on with
+    it), the ranges leased to the repairer, so that no one sends or drops those rows
+    before they are repaired."""
+
+    step: Step
+    boot_start: float
+    ranges: list[Ids]
+    repaired: int = 0  # events changed so far
+
+
+class ClockKeeper:
+    """Queue time for one store (``clock``), and its looks at the clocks: it records
+    them, and after a step repairs what was stamped before it, the rows still to
+    repair leased to ``<owner>:repair``."""
+
+    def __init__(
+        self, db: Database, clocks: SystemClocks, codecs: Codecs, owner: str, lease_s: float
+    ) -> None:
+        self.queue_time = open_queue_time(db.write, clocks)
+        self._db, self._codecs = db, codecs
+        self._owner, self._lease_s = f"{owner}:repair", lease_s
+        self.repairing = True  # until a look finds no repair under way (a crash's)
+
+    def due(self) -> bool:
+        """Whether a claim must look first: a step not seen yet, or a repair under way."""
+        return self.repairing or self.queue_time.stepped()
+
+    def look(self) -> float:
+        """Record the clocks (``clock.record_moment``); after a step, start repairing
+        what was stamped before it; go on with a repair under way for up to
+        ``REPAIR_BUDGET_S``, a chunk of rows per transaction, so that a day's backlog
+        is repaired over a few looks and never holds the queue for long. The step's
+        seconds (0.0 for none)."""
+        step, repair = self._db.write(self._record, durable=False)
+        if step is not None:
+            log.warning(
+                "queue %s: the wall clock stepped by %+.1f s; repairing the queued events "
+                "of this boot stamped before it",
+                self._db.path,
+                step.seconds,
             )
+        deadline = time.monotonic() + REPAIR_BUDGET_S
+        while repair is not None and repair.ranges:  # a chunk at least, then to the budget
+            repair = self._db.write(self._repair_chunk, durable=False)
+            if time.monotonic() >= deadline:
+                break
+        if repair is not None and not repair.ranges:
+            log.warning(
+                "queue %s: %d queued event(s) stamped before the step of %+.1f s repaired",
+                self._db.path,
+                repair.repaired,
+                repair.step.seconds,
+            )
+        self.repairing = repair is not None and bool(repair.ranges)
+        return step.seconds if step else 0.0
+
+    def _record(self, cursor: sqlite3.Cursor) -> tuple[Step | None, Repair | None]:
+        step = self.queue_time.record(cursor)
+        repair = pending_repair(cursor)
+        if step is not None:
+            if repair is not None:  # a second step before the first's repair ended (rare)
+                _repair_ranges(cursor, self._codecs, repair, limit=None)
+            repair = _start(cursor, self._codecs, step, self.queue_time.base, self._now())
+        if repair is not None:  # the lease renewed, or taken again by a new process
+            _save(cursor, repair, self._owner, self._now() + self._lease_s)
+        return step, repair
+
+    def _repair_chunk(self, cursor: sqlite3.Cursor) -> Repair | None:
+        """The next chunk of rows of the repair under way; the repair as it stands."""
+        repair = pending_repair(cursor)
+        if repair is not None:
+            repair = _repair_ranges(cursor, self._codecs, repair, limit=CHUNK_ROWS)
+            _save(cursor, repair, self._owner, self._now() + self._lease_s)
+        return repair
+
+    def _now(self) -> float:
+        return self.queue_time.now()
+
+
+def pending_repair(cursor: sqlite3.Cursor) -> Repair | None:
+    """The repair under way, if one is."""
+    row = cursor.execute("SELECT value FROM meta WHERE key = ?", (REPAIR_KEY,)).fetchone()
+    if row is None:
+        return None
+    kept = orjson.loads(row[0])
+    ranges = [(first, last) for first, last in kept["ranges"]]
+    return Repair(Step(*kept["step"]), kept["boot_start"], ranges, kept["repaired"])
+
+
+def _start(
+    cursor: sqlite3.Cursor, codecs: Codecs, step: Step, boot_start: float, now: float
+) -> Repair | None:
+    """A repair of the rows of this boot queued up to the step (ids follow queue time:
+    two short lookups from either end find them); None when there are none. Rows a
+    sender holds are repaired at once (a batch or two: their sender gives them back
+    when it sees the step, ``QueueStore.stepped_since``); the others are left to the
+    chunks, under the repairer's lease."""
+    first = cursor.execute(
+        "SELECT id FROM events WHERE queued_at >= ? ORDER BY id LIMIT 1", (boot_start,)
+    ).fetchone()
+    last = cursor.execute(
+        "SELECT id FROM events WHERE queued_at <= ? ORDER BY id DESC LIMIT 1", (step.at,)
+    ).fetchone()
+    if first is None or last is None or first[0] > last[0]:
+        return None
+    span = (first[0], last[0])
+    free = [
+        (max(low, span[0]), min(high, span[1]))
+        for low, high in leases.free_ranges(cursor, now)
+        if low <= span[1] and high >= span[0]
+    ]
+    held = _gaps(span, free)
+    done = _repair_ranges(cursor, codecs, Repair(step, boot_start, held), limit=None)
+    return Repair(step, boot_start, free, done.repaired)
+
+
+def _gaps(span: Ids, ranges: list[Ids]) -> list[Ids]:
+    """The parts of ``span`` that ``ranges`` (sorted, within it) leave out. Pure."""
+    gaps, low = [], span[0]
+    for first, last in ranges:
+        if first > low:
+            gaps.append((low, first - 1))
+        low = last + 1
+    if low <= span[1]:
+        gaps.append((low, span[1]))
+    return gaps
+
+
+def _save(cursor: sqlite3.Cursor, repair: Repair, owner: str, until: float) -> None:
+    """Keep the repair under way and its ranges under ``owner``'s lease; forget it
+    once it is done."""
+    leases.give_back(cursor, owner)
+    if not repair.ranges:
+        cursor.execute("DELETE FROM meta WHERE key = ?", (REPAIR_KEY,))
+        return
+    for first, last in repair.ranges:
+        leases.take(cursor, first, last, owner, until)
+    kept = {**repair._asdict(), "step": list(repair.step)}
+    cursor.execute(
+        "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
+        (REPAIR_KEY, orjson.dumps(kept).decode()),
+    )
+
+
+def _repair_ranges(
+    cursor: sqlite3.Cursor, codecs: Codecs, repair: Repair, limit: int | None
+) -> Repair:
+    """Repair up to ``limit`` rows (None: all) from the start of the repair's
+    ranges; the repair with what is left of them."""
+    ranges, repaired = list(repair.ranges), repair.repaired
+    while ranges and limit != 0:
+        first, last = ranges[0]
+        rows = cursor.execute(
+            "SELECT id, count, queued_at, coalesce(newest_at, queued_at), codec, dict_id, "
+            "body FROM events WHERE id BETWEEN ? AND ? AND queued_at BETWEEN ? AND ? "
+            "ORDER BY id LIMIT ?",
+            (first, last, repair.boot_start, repair.step.at, -1 if limit is None else limit),
+        ).fetchall()
+        repaired += _repair_rows(cursor, codecs, rows, repair.step)
+        if limit is None or len(rows) < limit:
+            ranges.pop(0)
+        else:
+            ranges[0] = (rows[-1][0] + 1, last)
+        limit = None if limit is None else limit - len(rows)
+    return repair._replace(ranges=ranges, repaired=repaired)
+
+
+def _repair_rows(cursor: sqlite3.Cursor, codecs: Codecs, rows: list[Any], step: Step) -> int:
+    """Rewrite the rows holding events stamped before ``step``; the events changed."""
+    changed_events = size_change = 0
+    for row_id, count, first, last, codec, dict_id, body in rows:
+        jsons = split_frame(codecs.decode(codec, dict_id, body), count)
+        events = [orjson.loads(json) for json in jsons]
+        fixed = [repaired(event, (first, last), step) for event in events]
+        if not any(fixed):
+            continue
+        changed_events += sum(fixed)
+        jsons = [orjson.dumps(event) for event in events]
+        encoded = codecs.encode(b"\n".join(jsons))
+        size_change += len(encoded.body) - len(body)
+        cursor.execute(
+            "UPDATE events SET codec = ?, dict_id = ?, json_size = ?, body = ? WHERE id = ?",
+            (encoded.codec, encoded.dict_id, sum(map(len, jsons)), encoded.body, row_id),
+        )
     if size_change:
         bump_counters(cursor, stored_bytes=size_change)
     return changed_events
-
-
-def record_clocks(db: Database, queue_time: QueueTime, codecs: Codecs) -> float:
-    """Record the clocks (``clock.record_moment``) and, after a step, repair what was
-    stamped before it, in one transaction; the step's seconds (0.0 for none)."""
-
-    def record(cursor: sqlite3.Cursor) -> tuple[Step | None, int]:
-        step = queue_time.record(cursor)
-        if step is None:
-            return None, 0
-        return step, repair_queued(cursor, codecs, step, boot_start=queue_time.base)
-
-    step, fixed = db.write(record, durable=False)
-    if step is None:
-        return 0.0
-    log.warning(
-        "queue %s: the wall clock stepped by %+.1f s; %d queued event(s) stamped before "
-        "it repaired",
-        db.path,
-        step.seconds,
-        fixed,
-    )
-    return step.seconds

@@ -29,7 +29,7 @@ import orjson
 from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
 from phytrace_edge.queue import claims, leases, maintenance
 from phytrace_edge.queue.caps import Caps, wal_reserve
-from phytrace_edge.queue.clock import SystemClocks, open_queue_time
+from phytrace_edge.queue.clock import SystemClocks
 from phytrace_edge.queue.codecs import Codecs, Encoded
 from phytrace_edge.queue.database import Database, configure
 from phytrace_edge.queue.dead_letters import DeadLetterBox, dead_letter_row
@@ -48,7 +48,7 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.ownership import Owner, dead_owners, sweep_dead_owners
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
 from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
-from phytrace_edge.queue.repair import record_clocks
+from phytrace_edge.queue.repair import ClockKeeper
 from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
 from phytrace_edge.queue.rows import NewRow, insert_rows
 from phytrace_edge.queue.service_state import write_service_state
@@ -77,22 +77,22 @@ class QueueStore:
         self.path = db.path
         self.limits = limits
         self.lease_s = lease_s
-        # queue time (queue/clock.py), unless a test brings its own clock
-        self.queue_time = None if clock else open_queue_time(db.write, clocks or SystemClocks())
-        self._clock = clock or self.queue_time.now  # type: ignore[union-attr]
         self._owner = Owner(db.path)
+        self.codecs = Codecs(compression)
+        # queue time (queue/clock.py) and repairs after a step, unless a test brings a clock
+        self._clocks = (
+            None
+            if clock
+            else ClockKeeper(db, clocks or SystemClocks(), self.codecs, self._owner.token, lease_s)
+        )
+        self._clock = clock or self._clocks.queue_time.now  # type: ignore[union-attr]
         self._claims = itertools.count(1)
         self.busy_timeout_s = DEFAULT_BUSY_TIMEOUT_S
         self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S  # monotonic
-        self.codecs = Codecs(compression)
         self._caps = Caps(limits, db.page_size, self.codecs, frame_events)
         self._wal_reserve = wal_reserve(limits.max_bytes)
         self._full_disk = FullDisk(db, self._wal_reserve)
-        db.execute(f"PRAGMA journal_size_limit = {self._wal_reserve}")
-        # checkpoints often enough that moving the WAL into the database never needs
-        # more room than the full-disk reserve holds
-        room = min(self._wal_reserve, db.reserve.size if db.reserve else self._wal_reserve)
-        db.execute(f"PRAGMA wal_autocheckpoint = {max(16, room // db.page_size // 2)}")
+        db.size_wal(self._wal_reserve)
         load_dictionaries(db, self.codecs, self._clock())
         self._sealer = Sealer(self.codecs, frame_events)
         self._seal_after = 0.0  # store clock: no sealing before (the disk was full)
@@ -198,8 +198,7 @@ class QueueStore:
             ):
                 with contextlib.suppress(QueueFullError):
                     return self._insert(rows)
-            self._full_disk.count_refused(len(rows))
-            self._full_disk.report_refused(self.path, len(rows))
+            self._full_disk.refused(self.path, len(rows))
             return PutResult(0, len(rows))
 
     def _encode(self, event: dict[str, Any], important: bool) -> tuple[str, bool, int, Encoded]:
@@ -271,8 +270,8 @@ class QueueStore:
         return self._claim(lease, (max_events, max_bytes))
 
     def _claim(self, lease: Callable[..., Any], limits: tuple[int, int]) -> Batch | None:
-        if self.queue_time and self.queue_time.stepped():  # repair before sending
-            self.record_clocks()
+        if self._clocks and self._clocks.due():
+            self._clocks.look()  # repair before sending
         now = self._clock()
         # each claim its own token: releasing a stale claim never frees a newer one
         token = f"{self._owner.token}:{next(self._claims)}"
@@ -336,10 +335,9 @@ class QueueStore:
         return expired
 
     def record_clocks(self) -> float:
-        """Write the last moment seen, for the next boot's queue time; after a step of
-        the wall clock, repair the stamps queued before it (``repair``). The step's
-        seconds (0.0 for none)."""
-        return record_clocks(self._db, self.queue_time, self.codecs) if self.queue_time else 0.0
+        """Write the last moment seen (the next boot's queue time goes on from it); a
+        step of the wall clock's seconds, 0.0 for none (``repair.ClockKeeper.look``)."""
+        return self._clocks.look() if self._clocks else 0.0
 
     def stepped_since(self, at: float) -> bool:
         """Whether the wall clock stepped after ``at`` (a batch's stamps were repaired)."""
@@ -391,7 +389,7 @@ class QueueStore:
     def stats(self) -> QueueStats:
         """What ``status`` shows about the queue (drops not yet written included)."""
         now = self._clock()
-        wall = self.queue_time.clocks.now_wall() if self.queue_time else now  # for dates
+        wall = self._clocks.queue_time.clocks.now_wall() if self._clocks else now  # dates
         with self._db.lock:
             try:
                 stats = stats_from(self._db.connection, str(self.path), now, wall - now)

@@ -13,6 +13,7 @@ import orjson
 import pytest
 
 from phytrace_edge.host_clock import synchronized
+from phytrace_edge.queue import repair
 from phytrace_edge.queue.clock import Instant, LastSeen, Step, boot_base
 from phytrace_edge.queue.frames import SEAL_AFTER_S
 from phytrace_edge.queue.inspect import read_stats
@@ -335,4 +336,76 @@ def test_an_export_under_way_at_a_step_writes_the_repaired_stamps(tmp_path: Path
     assert all(e["captured_at"].startswith("2026-") for e in written)
     assert all("corrected_by_s" in e["wall_clock"] for e in written)
     assert store.stats().depth == 0
+    store.close()
+
+
+@pytest.fixture
+def repair_by_the_chunk(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A repair of two rows per look, as a day's backlog goes on a slow machine."""
+    monkeypatch.setattr(repair, "CHUNK_ROWS", 2)
+    monkeypatch.setattr(repair, "REPAIR_BUDGET_S", 0.0)
+
+
+def corrections(events: dict[int, dict]) -> dict[int, float]:
+    return {n: e["wall_clock"].get("corrected_by_s", 0.0) for n, e in events.items()}
+
+
+@pytest.mark.usefixtures("repair_by_the_chunk")
+def test_a_long_repair_goes_by_the_chunk_and_nothing_is_sent_unrepaired(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()
+    put_stamped(store, machine, range(10))
+    sending = store.claim_batch(1, MIB)  # event 0 is on its way at the step
+    machine.wall += NOW - Y2001
+    machine.run(1.0)
+    store.record_clocks()  # the step seen: the held row at once, then one chunk
+    store.release(sending)
+    sent: dict[int, dict] = {}
+    looks = 0
+    while (batch := store.claim_batch(3, MIB, important_first=False)) is not None:
+        sent |= {orjson.loads(e.json)["seq"]: orjson.loads(e.json) for e in batch.events}
+        store.ack(batch)
+        looks += 1
+    assert sorted(sent) == list(range(10))
+    assert list(corrections(sent).values()) == [pytest.approx(NOW - Y2001)] * 10  # each once
+    assert looks > 1
+    store.close()
+
+
+@pytest.mark.usefixtures("repair_by_the_chunk")
+def test_a_repair_cut_short_by_a_crash_goes_on_at_the_next_open(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()
+    put_stamped(store, machine, range(10))
+    machine.wall += NOW - Y2001
+    machine.run(1.0)
+    store.record_clocks()  # two rows of ten repaired
+    store.close()  # as good as a crash: the repair is in meta, its lease dies with us
+    store = open_store(tmp_path / "q.db", machine)
+    sent: dict[int, dict] = {}
+    while (batch := store.claim_batch(3, MIB, important_first=False)) is not None:
+        sent |= {orjson.loads(e.json)["seq"]: orjson.loads(e.json) for e in batch.events}
+        store.ack(batch)
+    assert sorted(sent) == list(range(10))
+    assert list(corrections(sent).values()) == [pytest.approx(NOW - Y2001)] * 10
+    store.close()
+
+
+@pytest.mark.usefixtures("repair_by_the_chunk")
+def test_a_second_step_during_a_repair_applies_both(tmp_path: Path) -> None:
+    machine = Machine(wall=Y2001)
+    store = open_store(tmp_path / "q.db", machine)
+    store.record_clocks()
+    put_stamped(store, machine, range(10))
+    machine.wall += NOW - Y2001
+    machine.run(1.0)
+    store.record_clocks()
+    machine.wall -= 5.0  # chrony's second step
+    machine.run(1.0)
+    assert store.record_clocks() == pytest.approx(-5.0)
+    events = claimed(store)
+    assert sorted(events) == list(range(10))
+    assert list(corrections(events).values()) == [pytest.approx(NOW - Y2001 - 5.0)] * 10
     store.close()
