@@ -16,41 +16,23 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sqlite3
+import sys
 import tempfile
 import time
 import uuid
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
 from phytrace_edge import run_simulation
-from phytrace_edge.queue.clock import Instant
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.repair import pending_repair
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import GIB, MIB
+from tests.unit.queue_fixtures import NOW, Y2001, Machine
 
-Y2001, NOW = 978_307_200.0, 1_795_000_000.0
 TICK_S = 0.2
-
-
-class Machine:
-    """A wall clock that steps and a CLOCK_BOOTTIME that does not."""
-
-    def __init__(self) -> None:
-        self.wall, self.since_boot = Y2001, 12.0
-
-    def read(self, ask_kernel: bool = True) -> Instant:
-        return Instant(self.wall, self.since_boot, "boot-1", False)
-
-    def now_since_boot(self) -> float:
-        return self.since_boot
-
-    def now_wall(self) -> float:
-        return self.wall
-
-    def run(self, seconds: float) -> None:
-        self.wall += seconds
-        self.since_boot += seconds
 
 
 def fill(store: QueueStore, machine: Machine, count: int) -> None:
@@ -79,7 +61,7 @@ def main() -> None:
     parser.add_argument("--events", type=int, default=432_000, help="a day at 5 Hz")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="bench-repair-"))
-    machine = Machine()
+    machine = Machine(wall=Y2001)
     limits = QueueLimits(max_bytes=4 * GIB)
     store = QueueStore.open(folder / "queue.db", limits=limits, clocks=machine)  # type: ignore[arg-type]
     store.record_clocks()

@@ -350,44 +350,53 @@ def corrections(events: dict[int, dict]) -> dict[int, float]:
     return {n: e["wall_clock"].get("corrected_by_s", 0.0) for n, e in events.items()}
 
 
-@pytest.mark.usefixtures("repair_by_the_chunk")
-def test_a_long_repair_goes_by_the_chunk_and_nothing_is_sent_unrepaired(tmp_path: Path) -> None:
+def ten_queued_in_2001(path: Path) -> tuple[Machine, QueueStore]:
+    """A store with ten events stamped in 2001 on an unsynchronized clock."""
     machine = Machine(wall=Y2001)
-    store = open_store(tmp_path / "q.db", machine)
+    store = open_store(path, machine)
     store.record_clocks()
     put_stamped(store, machine, range(10))
-    sending = store.claim_batch(1, MIB)  # event 0 is on its way at the step
-    machine.wall += NOW - Y2001
+    return machine, store
+
+
+def ntp_steps(machine: Machine, seconds: float = NOW - Y2001) -> None:
+    machine.wall += seconds
     machine.run(1.0)
-    store.record_clocks()  # the step seen: the held row at once, then one chunk
-    store.release(sending)
+
+
+def sent_all(store: QueueStore) -> tuple[dict[int, dict], int]:
+    """Every event as the backfill sends it, by seq; and the number of batches."""
     sent: dict[int, dict] = {}
-    looks = 0
+    batches = 0
     while (batch := store.claim_batch(3, MIB, important_first=False)) is not None:
         sent |= {orjson.loads(e.json)["seq"]: orjson.loads(e.json) for e in batch.events}
         store.ack(batch)
-        looks += 1
+        batches += 1
+    return sent, batches
+
+
+@pytest.mark.usefixtures("repair_by_the_chunk")
+def test_a_long_repair_goes_by_the_chunk_and_nothing_is_sent_unrepaired(tmp_path: Path) -> None:
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    sending = store.claim_batch(1, MIB)  # event 0 is on its way at the step
+    ntp_steps(machine)
+    store.record_clocks()  # the step seen: the held row at once, then one chunk
+    store.release(sending)
+    sent, batches = sent_all(store)
     assert sorted(sent) == list(range(10))
     assert list(corrections(sent).values()) == [pytest.approx(NOW - Y2001)] * 10  # each once
-    assert looks > 1
+    assert batches > 1
     store.close()
 
 
 @pytest.mark.usefixtures("repair_by_the_chunk")
 def test_a_repair_cut_short_by_a_crash_goes_on_at_the_next_open(tmp_path: Path) -> None:
-    machine = Machine(wall=Y2001)
-    store = open_store(tmp_path / "q.db", machine)
-    store.record_clocks()
-    put_stamped(store, machine, range(10))
-    machine.wall += NOW - Y2001
-    machine.run(1.0)
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    ntp_steps(machine)
     store.record_clocks()  # two rows of ten repaired
     store.close()  # as good as a crash: the repair is in meta, its lease dies with us
     store = open_store(tmp_path / "q.db", machine)
-    sent: dict[int, dict] = {}
-    while (batch := store.claim_batch(3, MIB, important_first=False)) is not None:
-        sent |= {orjson.loads(e.json)["seq"]: orjson.loads(e.json) for e in batch.events}
-        store.ack(batch)
+    sent, _ = sent_all(store)
     assert sorted(sent) == list(range(10))
     assert list(corrections(sent).values()) == [pytest.approx(NOW - Y2001)] * 10
     store.close()
@@ -395,15 +404,10 @@ def test_a_repair_cut_short_by_a_crash_goes_on_at_the_next_open(tmp_path: Path) 
 
 @pytest.mark.usefixtures("repair_by_the_chunk")
 def test_a_second_step_during_a_repair_applies_both(tmp_path: Path) -> None:
-    machine = Machine(wall=Y2001)
-    store = open_store(tmp_path / "q.db", machine)
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    ntp_steps(machine)
     store.record_clocks()
-    put_stamped(store, machine, range(10))
-    machine.wall += NOW - Y2001
-    machine.run(1.0)
-    store.record_clocks()
-    machine.wall -= 5.0  # chrony's second step
-    machine.run(1.0)
+    ntp_steps(machine, -5.0)  # chrony's second step
     assert store.record_clocks() == pytest.approx(-5.0)
     events = claimed(store)
     assert sorted(events) == list(range(10))
