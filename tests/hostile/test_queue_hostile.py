@@ -46,6 +46,28 @@ db.execute("ROLLBACK")
 """
 
 
+def lock_with_events_waiting(queue: Path) -> subprocess.Popen[str]:
+    """Another process holding the queue's write lock while events wait, so that the
+    sender has a claim or an ack to make and meets the lock. The queue may happen to be
+    empty the moment the lock is taken (the sender keeps up with the robot), and then
+    stays so (the writer cannot add events under the lock): then take it again."""
+    deadline = time.monotonic() + 30
+    while True:
+        holder = subprocess.Popen(
+            [sys.executable, "-c", HOLD_LOCK, str(queue)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        assert holder.stdout is not None
+        assert holder.stdout.readline().strip() == "locked"
+        stats = read_stats(str(queue))
+        if stats is not None and stats.depth > 0:
+            return holder
+        holder.communicate("release\n", timeout=30)
+        assert time.monotonic() < deadline, "the queue stayed empty: no events to meet the lock"
+
+
 def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
     tmp_path: Path, stub
 ) -> None:
@@ -71,13 +93,7 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
     holder = None
     try:
         wait_for(lambda: service.sender.stats.events_sent > 10, 30, "the first sends")
-        holder = subprocess.Popen(
-            [sys.executable, "-c", HOLD_LOCK, str(tmp_path / "queue.db")],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        assert holder.stdout.readline().strip() == "locked"
+        holder = lock_with_events_waiting(tmp_path / "queue.db")
         # the writer, the heartbeat and the sender each wait out the busy timeout in turn
         wait_for(lambda: service.sender.stats.queue_errors > 0, 60, "the sender to meet the lock")
         during = len(built)
