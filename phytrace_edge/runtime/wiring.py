@@ -12,7 +12,7 @@ each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
                              -> builder -> ingest -> sim
-    everything -> udm, units, redact, errors, _version, host_clock, durable
+    everything -> udm, units, redact, errors, _version, host_clock, host_memory, durable
 
 ``stub`` (the PhyCloud dev stub) stands apart: only the CLI starts it, and it uses only
 ``udm`` and ``errors``. No stage imports ``config`` or ``runtime``; the simulator
@@ -32,6 +32,7 @@ from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
+from phytrace_edge.host_memory import give_back_free_memory
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Source
 from phytrace_edge.ingest.sources.registry import create_source
@@ -51,6 +52,7 @@ from phytrace_edge.runtime.writer import QueueWriter
 from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import HttpTransport, Transport
+from phytrace_edge.udm.schema import prepare_validator
 
 # A file being imported is staged a chunk at a time: never full, and events days old
 # must not expire while staged.
@@ -153,6 +155,8 @@ def build_service(
         lock.release()
         raise
     service.on_stopped(lock.release)
+    prepare_validator()  # its one-off peak now, then handed back
+    give_back_free_memory()
     return service
 
 

@@ -67,6 +67,12 @@ def _compiled() -> Callable[[Any], Any]:
     return fastjsonschema.compile(inline_refs(load_schema()))
 
 
+def prepare_validator() -> None:
+    """Compile the validator now rather than at the first event: a service does it
+    at start, then gives the compiler's memory back (``host_memory``)."""
+    _compiled()
+
+
 def find_violation(event: Any) -> SchemaViolation | None:
     """The first schema violation of ``event``, or None when it is valid."""
     try:

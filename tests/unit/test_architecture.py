@@ -18,7 +18,7 @@ from functools import cache
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "phytrace_edge"
-BASE = {"udm", "units", "redact", "errors", "_version", "host_clock", "durable"}
+BASE = {"udm", "units", "redact", "errors", "_version", "host_clock", "host_memory", "durable"}
 MODULE_STRING = re.compile(r"^phytrace_edge(\.[a-z_0-9]+)+(:\w+)?$")
 
 # The dependency rule of runtime/wiring.py's docstring: each component may import the
@@ -41,6 +41,7 @@ DECLARED: dict[str, set[str]] = {
     "_version": set(),
     "host_clock": set(),
     "durable": set(),
+    "host_memory": set(),
     "launch": set(),
 }
 
