@@ -149,8 +149,9 @@ class HttpTransport:
                 "cross the network unencrypted - use https",
                 endpoint,
             )
-        verify: ssl.SSLContext | bool = True
-        if ca_bundle:
+        # TLS only for https: the CA certificates cost 1.2 MiB an http endpoint never uses
+        verify: ssl.SSLContext | bool = urlsplit(endpoint).scheme == "https"
+        if ca_bundle and verify:
             verify = ssl.create_default_context()
             try:  # in addition to the system CAs
                 verify.load_verify_locations(cafile=ca_bundle)
