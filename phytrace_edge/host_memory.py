@@ -20,7 +20,8 @@ def give_back_free_memory() -> None:
     """Return the free pages of the C heap to the kernel (glibc's ``malloc_trim``).
     Python frees what start-up needed only once, compiling the UDM validator above all
     (some 25 MiB), but glibc keeps the pages mapped; a service that runs for months
-    never needs them again (docs/benchmarks.md, "Footprint")."""
+    never needs them again; after each maintenance pass too, for the buffers of a
+    drained backlog (docs/benchmarks.md, "Footprint")."""
     trim = _malloc_trim()
     if trim is not None:
         trim(0)

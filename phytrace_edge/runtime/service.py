@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 from phytrace_edge._version import __version__
 from phytrace_edge.errors import QueueError
+from phytrace_edge.host_memory import give_back_free_memory
 from phytrace_edge.ingest.sources.base import Finished
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import stalled
@@ -128,6 +129,7 @@ class BridgeService:
             due = time.monotonic() + MAINTENANCE_EVERY_S
             try:
                 self.store.maintain()
+                give_back_free_memory()  # a drained backlog's buffers, freed but kept mapped
                 log.debug("queue maintenance pass done")
             except QueueError as exc:
                 log.warning("queue maintenance failed (%s); will try again", exc)
