@@ -13,14 +13,28 @@ from phytrace_edge.queue.rows import MAX_ID
 
 def free_ranges(cursor: sqlite3.Cursor, now: float) -> list[tuple[int, int]]:
     """Id ranges no live lease covers, oldest first (expired leases are removed)."""
+    return gaps((0, MAX_ID), live_ranges(cursor, now))
+
+
+def live_ranges(cursor: sqlite3.Cursor, now: float) -> list[tuple[int, int]]:
+    """The id ranges of the live leases by first id (expired leases are removed)."""
     cursor.execute("DELETE FROM leases WHERE expires_at <= ?", (now,))
-    ranges, low = [], 0
-    for first, last in cursor.execute("SELECT first_id, last_id FROM leases ORDER BY first_id"):
+    return cursor.execute("SELECT first_id, last_id FROM leases ORDER BY first_id").fetchall()
+
+
+def gaps(span: tuple[int, int], ranges: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The parts of ``span`` (first, last id) that no range of ``ranges`` covers; the
+    ranges sorted by first id, overlapping or not. Pure."""
+    found, low = [], span[0]
+    for first, last in ranges:
+        if first > span[1]:
+            break
         if first > low:
-            ranges.append((low, first - 1))
+            found.append((low, first - 1))
         low = max(low, last + 1)
-    ranges.append((low, MAX_ID))
-    return ranges
+    if low <= span[1]:
+        found.append((low, span[1]))
+    return found
 
 
 def take(cursor: sqlite3.Cursor, first_id: int, last_id: int, owner: str, until: float) -> None:

@@ -189,26 +189,10 @@ def _start(
     if first is None or last is None or first[0] > last[0]:
         return None
     span = (first[0], last[0])
-    free = [
-        (max(low, span[0]), min(high, span[1]))
-        for low, high in leases.free_ranges(cursor, now)
-        if low <= span[1] and high >= span[0]
-    ]
-    held = _gaps(span, free)
+    free = leases.gaps(span, leases.live_ranges(cursor, now))
+    held = leases.gaps(span, free)
     done = _repair_ranges(cursor, codecs, Repair(step, boot_start, held), limit=None)
     return Repair(step, boot_start, free, done.repaired)
-
-
-def _gaps(span: Ids, ranges: list[Ids]) -> list[Ids]:
-    """The parts of ``span`` that ``ranges`` (sorted, within it) leave out. Pure."""
-    gaps, low = [], span[0]
-    for first, last in ranges:
-        if first > low:
-            gaps.append((low, first - 1))
-        low = last + 1
-    if low <= span[1]:
-        gaps.append((low, span[1]))
-    return gaps
 
 
 def _save(cursor: sqlite3.Cursor, repair: Repair, owner: str, until: float) -> None:
