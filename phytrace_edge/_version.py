@@ -2,4 +2,4 @@
 (the CLI, the service, the request headers, hand-carry files) imports it from here, so
 none of them depends on the package's top."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

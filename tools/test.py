@@ -8,10 +8,13 @@ Exits non-zero when any check fails. .ci/run calls exactly this.
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 
 from bootstrap import ROOT, ensure_venv  # tools/bootstrap.py, beside this file
+
+NODE_READER = ROOT / "tests" / "integration" / "mcap_reader"
 
 CHECKS = [
     ("ruff lint", ["-m", "ruff", "check", "."]),
@@ -33,9 +36,27 @@ def install_real_rclpy() -> None:
         )
 
 
+def install_node_reader() -> None:
+    """The npm packages of the independent MCAP reader (tests/integration/mcap_reader),
+    exactly as its package-lock.json says, without install scripts. Without npm that
+    test says why and skips; in CI it fails instead."""
+    npm = shutil.which("npm")
+    if npm is None:
+        print("warning: npm is not installed; the independent MCAP reader test will skip")
+        return
+    installed = NODE_READER / "node_modules" / ".package-lock.json"
+    lock = NODE_READER / "package-lock.json"
+    if installed.exists() and installed.stat().st_mtime >= lock.stat().st_mtime:
+        return
+    command = [npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts", "--loglevel=error"]
+    if subprocess.run(command, cwd=NODE_READER).returncode != 0:
+        print("warning: npm ci failed; the independent MCAP reader test will skip")
+
+
 def main() -> int:
     python = ensure_venv(".venv", ".[test]")
     install_real_rclpy()
+    install_node_reader()
     failed = []
     for name, args in CHECKS:
         print(f"== {name}", flush=True)

@@ -23,7 +23,17 @@ from phytrace_edge.errors import EXIT_INTERRUPTED, EXIT_OK, PhytraceError
 # command -> its module, imported when used: one run of the CLI needs one of them
 COMMANDS = {
     name: f"phytrace_edge.cli.{name.replace('-', '_')}"
-    for name in ("run", "status", "drain", "config", "sim", "dead-letters", "stub", "export")
+    for name in (
+        "run",
+        "status",
+        "drain",
+        "config",
+        "sim",
+        "dead-letters",
+        "stub",
+        "export",
+        "inspect",
+    )
 } | {"import": "phytrace_edge.cli.import_files"}  # `import` is a Python keyword
 DESCRIPTION = "PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud."
 

@@ -58,6 +58,7 @@ def _import_one(path: Path, store: QueueStore, sender: Sender, deadline: float |
     from tqdm import tqdm
 
     from phytrace_edge.ship.export import export_chunks
+    from phytrace_edge.ship.handcarry import NotAnExport
 
     if not path.is_file():
         error(f"{path}: no such file")
@@ -72,6 +73,9 @@ def _import_one(path: Path, store: QueueStore, sender: Sender, deadline: float |
             if not delivered:
                 break
     sent = sender.stats.events_sent - sent_before
+    if isinstance(damage, NotAnExport):
+        error(str(damage))
+        return False
     if damage is not None:
         error(f"{damage}; the {read} event(s) before it were {'sent' if delivered else 'read'}")
     if not delivered:

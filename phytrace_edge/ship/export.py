@@ -1,6 +1,6 @@
 """``export`` and ``import``: the backlog into a hand-carry file, oldest first, for a
 robot that has no network, and such a file into a queue that a sender delivers from
-(``handcarry.py`` is the file format).
+(``handcarry.py`` is the file format, MCAP; ``handcarry_phx.py`` reads 0.1.0's).
 
 The events are claimed under leases like a sender's, written, fsynced, and read back;
 only when the file under its final name holds every claimed event are they deleted
@@ -21,11 +21,11 @@ from typing import Any
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.records import Batch
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, Manifest, open_export
+from phytrace_edge.ship import handcarry, handcarry_phx
+from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, Manifest, NotAnExport
 
 BATCH_EVENTS = 500
 BATCH_JSON_BYTES = 4 * 1024 * 1024
-MANIFEST_ROOM = 4096  # bytes kept free under --max-bytes for the manifest
 
 
 def export_backlog(
@@ -91,14 +91,19 @@ def _fill(
     """Claim and write batches until the queue is empty or the next batch might not
     fit; leases are renewed as the file grows (a slow stick)."""
     renewed_at, largest = time.monotonic(), 0
-    while writer.compressed_bytes + 2 * largest + MANIFEST_ROOM <= max_bytes or not batches:
+    # queue time reads as unix seconds on a good clock; this maps it to the wall clock
+    # when it did not (a queue that went through a clock step or a reboot without RTC)
+    wall_minus_queue = time.time() - store.now()
+    while (
+        writer.compressed_bytes + 2 * largest + writer.bytes_to_finish <= max_bytes or not batches
+    ):
         batch = store.claim_batch(BATCH_EVENTS, BATCH_JSON_BYTES, important_first=False)
         if batch is None:
             return
         batches.append(batch)
         before = writer.compressed_bytes
         for event in batch.events:
-            writer.write(event.id, event.json)
+            writer.write(event.id, event.json, event.queued_at + wall_minus_queue)
         writer.flush_block()
         largest = max(largest, writer.compressed_bytes - before)
         progress(len(batch.events))
@@ -111,10 +116,12 @@ def _fill(
 def _verify(path: Path, event_ids: list[str]) -> None:
     """Read the finished file back: every claimed event, in order, and a manifest
     that matches; ``DamagedExport`` otherwise (a stick that lies about its writes)."""
-    reader = open_export(path)
+    reader = handcarry.open_export(path)
     read = [event["event_id"] for event in reader.events()]
     if read != event_ids:
-        raise DamagedExport(str(path), 2, "the file read back does not hold the exported events")
+        raise DamagedExport(
+            str(path), "byte 0", "the file read back does not hold the exported events"
+        )
 
 
 def _release(store: QueueStore, batches: list[Batch]) -> None:
@@ -124,15 +131,30 @@ def _release(store: QueueStore, batches: list[Batch]) -> None:
             store.release(batch)
 
 
+HandcarryReader = handcarry.ExportReader | handcarry_phx.ExportReader
+
+
+def open_handcarry(path: Path) -> HandcarryReader:
+    """A reader of a hand-carry file of either format, told apart by its first bytes;
+    ``NotAnExport`` for anything else."""
+    with path.open("rb") as raw:
+        magic = raw.read(len(handcarry.MCAP_MAGIC))
+    if magic.startswith(handcarry_phx.ZSTD_MAGIC):
+        return handcarry_phx.open_export(path)
+    if magic == handcarry.MCAP_MAGIC:
+        return handcarry.open_export(path)
+    raise NotAnExport(str(path), "byte 0", "not a phytrace-edge export (neither MCAP nor .phx)")
+
+
 def export_chunks(
     path: Path, size: int
 ) -> Iterator[tuple[list[dict[str, Any]], DamagedExport | None]]:
     """A hand-carry file's events in chunks of ``size``, each with None, and the last
     with the damage found (``DamagedExport``) if the file is not whole: the events
-    before the first bad line still come, so an import keeps what can be kept."""
+    before the first bad record still come, so an import keeps what can be kept."""
     chunk: list[dict[str, Any]] = []
     try:
-        for event in open_export(path).events():
+        for event in open_handcarry(path).events():
             chunk.append(event)
             if len(chunk) >= size:
                 yield chunk, None

@@ -1,48 +1,73 @@
 """The hand-carry file: a robot's backlog on a USB stick, for sites without a network.
 
-One zstd stream of JSON lines (docs/operations.md, "Hand-carry"):
+An MCAP file (https://mcap.dev), the container rosbag2 writes by default, so Foxglove,
+PlotJuggler, the ``mcap`` CLI and the MCAP libraries of every language open it
+(docs/operations.md, "Hand-carry"). Written and read with the ``mcap`` library:
 
-1. a header: ``{"phytrace_export": 1, "source_id", "schema_version", "created_at",
-   "bridge_version"}``;
-2. the events, oldest first, one per line, exactly as they were queued;
-3. a manifest: ``{"manifest": {"source_id", "events", "first_id", "last_id",
-   "first_captured_at", "last_captured_at", "schema_version", "sha256"}}``, where the
-   ids are the queue's and ``sha256`` covers every event line with its newline.
+- the header's profile is ``phytrace``; a ``phytrace.export`` metadata record comes
+  first (robot, schema and bridge version, when it was written);
+- one channel per event type (``telemetry.periodic``, ``log.record``, ...), message
+  encoding ``json``, whose schema is the UDM JSON Schema of that type
+  (``udm.schema.event_type_schema``, encoding ``jsonschema``);
+- one message per event, oldest first, its data exactly the JSON that was queued; log
+  time is the event's ``captured_at``, publish time when it was queued, sequence its
+  queue id;
+- zstd chunks with a CRC each, a CRC over the data section, and a summary (index);
+- last, the ``phytrace.manifest`` metadata record: what the file holds (``Manifest``),
+  with a sha256 over every message's data and a newline.
 
-A file without its manifest, or whose count or checksum does not match, is damaged:
-``read_export`` yields the events before the first bad line and then reports where
-the damage starts, so an import keeps what can be kept.
+A file without its manifest or summary, with a bad CRC, or whose count or checksum
+does not match is damaged: ``ExportReader.events`` yields the events before the first
+bad record and then raises ``DamagedExport`` with that record's byte offset, so an
+import keeps what can be kept. ``handcarry_phx`` reads the files of 0.1.0.
 """
 
 from __future__ import annotations
 
 import hashlib
-import io
 import os
+import struct
+import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import orjson
 import zstandard
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Statistics
+from mcap.stream_reader import StreamReader
+from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from phytrace_edge._version import __version__
 from phytrace_edge.durable import sync_folder
-from phytrace_edge.udm.event import format_timestamp
-from phytrace_edge.udm.schema import SCHEMA_VERSION
+from phytrace_edge.udm.event import format_timestamp, parse_timestamp
+from phytrace_edge.udm.schema import SCHEMA_VERSION, event_type_schema
 
-FORMAT_VERSION = 1
-ZSTD_LEVEL = 3
-LINE_MAX_BYTES = 16 * 1024 * 1024
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+PROFILE = "phytrace"
+EXPORT_RECORD = "phytrace.export"
+MANIFEST_RECORD = "phytrace.manifest"
+CHUNK_BYTES = 1024 * 1024  # uncompressed; the mcap library's default and Foxglove's
+RECORD_MAX_BYTES = 256 * 1024 * 1024  # a longer record is a damaged length field
+SUMMARY_ROOM = 4096  # bytes of a summary besides its schemas and chunk indexes
+CHUNK_INDEX_BYTES = 160  # a chunk index record with a few channels
+# anything a damaged file can make the parser raise
+_PARSE_ERRORS = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError)
 
 
 class DamagedExport(Exception):
-    """The file is not a whole hand-carry file: ``line`` is the first bad line."""
+    """The file is not a whole hand-carry file; ``where`` names the first bad record
+    (``byte N`` in an MCAP file, ``line N`` in a 0.1.0 file)."""
 
-    def __init__(self, path: str, line: int, reason: str) -> None:
-        super().__init__(f"{path}: line {line}: {reason}")
-        self.line, self.reason = line, reason
+    def __init__(self, path: str, where: str, reason: str) -> None:
+        super().__init__(f"{path}: {where}: {reason}")
+        self.where, self.reason = where, reason
+
+
+class NotAnExport(DamagedExport):
+    """The file is not a phytrace-edge hand-carry file at all."""
 
 
 @dataclass
@@ -57,55 +82,112 @@ class Manifest:
     last_captured_at: str | None = None
     schema_version: str = SCHEMA_VERSION
     sha256: str = ""
+    bridge_version: str = __version__
+
+    def as_metadata(self) -> dict[str, str]:
+        """MCAP metadata holds strings: None as an empty one."""
+        return {
+            f.name: "" if (v := getattr(self, f.name)) is None else str(v) for f in fields(self)
+        }
+
+    @classmethod
+    def from_metadata(cls, data: dict[str, str]) -> Manifest:
+        """ValueError or KeyError when a field is missing or not a number."""
+
+        def number(key: str) -> int | None:
+            return int(data[key]) if data[key] else None
+
+        return cls(
+            source_id=data["source_id"],
+            events=int(data["events"]),
+            first_id=number("first_id"),
+            last_id=number("last_id"),
+            first_captured_at=data["first_captured_at"] or None,
+            last_captured_at=data["last_captured_at"] or None,
+            schema_version=data["schema_version"],
+            sha256=data["sha256"],
+            bridge_version=data.get("bridge_version", ""),
+        )
 
 
 class ExportWriter:
-    """Writes one hand-carry file to ``path + ".part"``; ``finish`` adds the manifest,
-    fsyncs, and renames it to ``path``, so a file under its final name is whole."""
+    """Writes one hand-carry file to ``path + ".part"``; ``finish`` adds the manifest
+    and the summary, fsyncs, and renames it to ``path``, so a file under its final name
+    is whole."""
 
     def __init__(self, path: Path, source_id: str, now_s: float) -> None:
         self.path, self.part = path, path.with_name(path.name + ".part")
         self._raw: BinaryIO = self.part.open("wb")  # closed by finish or abort
-        self._stream = zstandard.ZstdCompressor(level=ZSTD_LEVEL).stream_writer(
-            self._raw, closefd=False
+        self._mcap = Writer(
+            self._raw,
+            chunk_size=CHUNK_BYTES,
+            compression=CompressionType.ZSTD,
+            enable_data_crcs=True,
         )
+        self._mcap.start(PROFILE, f"phytrace-edge/{__version__} {LIBRARY_IDENTIFIER}")
+        self._mcap.add_metadata(
+            EXPORT_RECORD,
+            {
+                "source_id": source_id,
+                "schema_version": SCHEMA_VERSION,
+                "created_at": format_timestamp(now_s),
+                "bridge_version": __version__,
+            },
+        )
+        self._channels: dict[str, int] = {}
+        self._schema_bytes: dict[str, int] = {}
+        self._chunks = 0
         self._digest = hashlib.sha256()
         self.manifest = Manifest(source_id)
-        header = {
-            "phytrace_export": FORMAT_VERSION,
-            "source_id": source_id,
-            "schema_version": SCHEMA_VERSION,
-            "created_at": format_timestamp(now_s),
-            "bridge_version": __version__,
-        }
-        self._stream.write(orjson.dumps(header) + b"\n")
 
     @property
     def compressed_bytes(self) -> int:
-        """Bytes on disk so far (what the compressor has flushed)."""
+        """Bytes on disk so far (exact after ``flush_block``)."""
         return self._raw.tell()
 
-    def write(self, queue_id: int, event_json: bytes) -> None:
-        line = event_json + b"\n"
-        self._stream.write(line)
-        self._digest.update(line)
+    @property
+    def bytes_to_finish(self) -> int:
+        """At most what ``finish`` adds: the manifest and the summary, which repeats
+        each schema, and room for the schemas of types not seen yet."""
+        schemas = sum(_schema_sizes().values()) + sum(self._schema_bytes.values())
+        return SUMMARY_ROOM + schemas + CHUNK_INDEX_BYTES * (self._chunks + 1)
+
+    def write(self, queue_id: int, event_json: bytes, queued_at_s: float) -> None:
+        """One event as it was queued (``queued_at_s`` in unix seconds)."""
+        event_type, captured_at = _type_and_time(event_json)
+        queued_ns = _ns(queued_at_s)
+        captured_ns = _ns(parse_timestamp(captured_at)) if captured_at else queued_ns
+        self._mcap.add_message(
+            self._channel(event_type), captured_ns, event_json, queued_ns, queue_id % 2**32
+        )
+        self._digest.update(event_json + b"\n")
         m = self.manifest
-        captured_at = _captured_at(event_json)
         m.events += 1
         m.first_id = queue_id if m.first_id is None else m.first_id
         m.last_id = queue_id
         m.first_captured_at = m.first_captured_at or captured_at
         m.last_captured_at = captured_at or m.last_captured_at
 
+    def _channel(self, event_type: str) -> int:
+        if event_type not in self._channels:
+            schema = orjson.dumps(event_type_schema(event_type))
+            schema_id = self._mcap.register_schema(
+                f"phytrace.udm/{event_type}", "jsonschema", schema
+            )
+            self._channels[event_type] = self._mcap.register_channel(event_type, "json", schema_id)
+            self._schema_bytes[event_type] = len(schema)
+        return self._channels[event_type]
+
     def flush_block(self) -> None:
-        """Push what was written to the file, so ``compressed_bytes`` is exact."""
-        self._stream.flush(zstandard.FLUSH_BLOCK)
+        """End the chunk in progress, so ``compressed_bytes`` is exact."""
+        self._mcap.flush()
+        self._chunks += 1
 
     def finish(self) -> Manifest:
+        self._mcap.flush()
         self.manifest.sha256 = self._digest.hexdigest()
-        self._stream.write(orjson.dumps({"manifest": vars(self.manifest)}) + b"\n")
-        self._stream.flush(zstandard.FLUSH_FRAME)
-        self._stream.close()
+        self._mcap.add_metadata(MANIFEST_RECORD, self.manifest.as_metadata())
+        self._mcap.finish()
         self._raw.flush()
         os.fsync(self._raw.fileno())
         self._raw.close()
@@ -119,91 +201,189 @@ class ExportWriter:
         self.part.unlink(missing_ok=True)
 
 
-def _captured_at(event_json: bytes) -> str | None:
+def _schema_sizes() -> dict[str, int]:
+    types = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health")
+    return {name: len(orjson.dumps(event_type_schema(name))) for name in types}
+
+
+def _type_and_time(event_json: bytes) -> tuple[str, str | None]:
+    """The event's type (its channel) and ``captured_at``; the queue holds only JSON
+    objects, so anything else is named rather than refused."""
     try:
-        value = orjson.loads(event_json).get("captured_at")
-    except (orjson.JSONDecodeError, AttributeError):
-        return None
-    return value if isinstance(value, str) else None
+        event = orjson.loads(event_json)
+    except orjson.JSONDecodeError:
+        return "unknown", None
+    if not isinstance(event, dict):
+        return "unknown", None
+    event_type, captured_at = event.get("event_type"), event.get("captured_at")
+    if not isinstance(captured_at, str) or not _is_timestamp(captured_at):
+        captured_at = None
+    return (event_type if isinstance(event_type, str) else "unknown"), captured_at
+
+
+def _is_timestamp(text: str) -> bool:
+    try:
+        parse_timestamp(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _ns(unix_s: float) -> int:
+    """Nanoseconds for an MCAP time (unsigned: a time before 1970 reads as 0)."""
+    return max(0, round(unix_s * 1e9))
 
 
 @dataclass
 class ExportReader:
-    """Reads a hand-carry file: ``header`` first, then iterate ``events()``; the
-    manifest is checked at the end (``DamagedExport`` otherwise)."""
+    """Reads a hand-carry file: iterate ``events()``; the manifest, the CRCs and the
+    summary are checked on the way (``DamagedExport`` at the first that fails), and
+    ``checks`` names what held."""
 
     path: Path
-    header: dict[str, Any]
+    header: dict[str, str] = field(default_factory=dict)
     manifest: Manifest | None = None
+    checks: list[str] = field(default_factory=list)
 
     def events(self) -> Iterator[dict[str, Any]]:
-        """Each event in order; raises ``DamagedExport`` at the first bad line, after
-        the good ones before it."""
-        digest, line_number = hashlib.sha256(), 1
-        for line_number, line in _lines(self.path, start=2):
-            document = _parse(self.path, line_number, line)
-            if "manifest" in document:
-                events = line_number - 2  # the lines between the header and here
-                self.manifest = _check_manifest(self.path, line_number, document, events, digest)
+        """Each event in order; raises ``DamagedExport`` at the first bad record, after
+        the good events before it."""
+        walk = _Walk(str(self.path), self)
+        for offset, record in _records(self.path):
+            yield from walk.take(offset, record)
+        walk.whole()
+
+
+@dataclass
+class _Walk:
+    """The state of one pass over a file's records (``ExportReader.events``)."""
+
+    path: str
+    reader: ExportReader
+    channels: dict[int, str] = field(default_factory=dict)
+    digest: Any = field(default_factory=hashlib.sha256)
+    count: int = 0
+    chunk_crcs: int = 0
+    data_end: bool = False
+    footer: tuple[int, Footer] | None = None
+
+    def damage(self, offset: int, reason: str) -> DamagedExport:
+        return DamagedExport(self.path, f"byte {offset}", reason)
+
+    def take(self, offset: int, record: Any) -> Iterator[dict[str, Any]]:
+        if isinstance(record, Header):
+            _check_profile(self.path, offset, record)
+        elif isinstance(record, Channel) and not self.data_end:
+            self.channels[record.id] = record.topic
+        elif isinstance(record, Message) and not self.data_end:
+            yield self.event(offset, record)
+        elif isinstance(record, Metadata):
+            self.metadata(offset, record)
+        elif isinstance(record, DataEnd):
+            self.data_end = True
+            if self.reader.manifest is None:
+                raise self.damage(offset, "the data ends without a manifest")
+            self.reader.checks += ["chunk CRCs", "data section CRC"]
+        elif isinstance(record, Statistics) and record.message_count != self.count:
+            raise self.damage(
+                offset,
+                f"the summary counts {record.message_count} events, the file has {self.count}",
+            )
+        elif isinstance(record, Footer):
+            self.footer = (offset, record)
+
+    def event(self, offset: int, message: Message) -> dict[str, Any]:
+        if self.reader.manifest is not None:
+            raise self.damage(offset, "an event after the manifest")
+        if message.channel_id not in self.channels:
+            raise self.damage(offset, f"an event on an unknown channel {message.channel_id}")
+        try:
+            event = orjson.loads(message.data)
+        except orjson.JSONDecodeError as exc:
+            raise self.damage(offset, f"an event that is not JSON ({exc})") from None
+        if not isinstance(event, dict) or not isinstance(event.get("event_id"), str):
+            raise self.damage(offset, "not an event (no event_id)")
+        self.digest.update(message.data + b"\n")
+        self.count += 1
+        return event
+
+    def metadata(self, offset: int, record: Metadata) -> None:
+        if record.name == EXPORT_RECORD:
+            self.reader.header = dict(record.metadata)
+        elif record.name == MANIFEST_RECORD:
+            try:
+                manifest = Manifest.from_metadata(record.metadata)
+            except (KeyError, ValueError):
+                raise self.damage(offset, "a manifest of the wrong shape") from None
+            if manifest.events != self.count:
+                raise self.damage(
+                    offset,
+                    f"the manifest counts {manifest.events} events, the file has {self.count}",
+                )
+            if manifest.sha256 != self.digest.hexdigest():
+                raise self.damage(offset, "the checksum does not match the events")
+            self.reader.manifest = manifest
+            self.reader.checks.append(f"manifest: {self.count} events, sha256")
+
+    def whole(self) -> None:
+        """After the last record: the summary is there and its CRC holds."""
+        if self.footer is None:  # the reader stops only at a footer: defensive
+            raise self.damage(0, "no footer")
+        offset, footer = self.footer
+        if not footer.summary_start:
+            raise self.damage(offset, "no summary (the file's index)")
+        with Path(self.path).open("rb") as raw:
+            raw.seek(footer.summary_start)
+            # the CRC covers the summary and the footer up to its own CRC field
+            covered = raw.read(offset + 1 + 8 + 8 + 8 - footer.summary_start)
+        if footer.summary_crc and zlib.crc32(covered) != footer.summary_crc:
+            raise self.damage(footer.summary_start, "the summary's CRC does not match")
+        self.reader.checks.append("summary CRC")
+
+
+def _records(path: Path) -> Iterator[tuple[int, Any]]:
+    """Each record of the file with the byte offset where it (or its chunk) starts;
+    ``DamagedExport`` at the first that cannot be read or whose CRC fails."""
+    with path.open("rb") as raw:
+        if raw.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise NotAnExport(str(path), "byte 0", "not an MCAP file")
+        raw.seek(0)
+        records = StreamReader(raw, validate_crcs=True, record_size_limit=RECORD_MAX_BYTES).records
+        offset = len(MCAP_MAGIC)
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
                 return
-            if not isinstance(document.get("event_id"), str):
-                raise DamagedExport(str(self.path), line_number, "not an event (no event_id)")
-            digest.update(line)
-            yield document
-        raise DamagedExport(
-            str(self.path), line_number + 1, "the file ends before its manifest (truncated)"
+            except _PARSE_ERRORS as exc:
+                raise DamagedExport(str(path), f"byte {offset}", _reason(exc)) from None
+            yield offset, record
+            # records of a chunk come after the whole chunk was read: the position is
+            # where the next top-level record starts
+            offset = raw.tell()
+
+
+def _reason(exc: Exception) -> str:
+    if isinstance(exc, EndOfFile):
+        return "the file ends inside this record (truncated)"
+    return f"cannot be read ({type(exc).__name__}: {exc})"
+
+
+def _check_profile(path: str, offset: int, header: Header) -> None:
+    if header.profile != PROFILE:
+        raise NotAnExport(
+            path,
+            f"byte {offset}",
+            f"an MCAP file, but not a phytrace-edge export (profile {header.profile!r})",
         )
 
 
 def open_export(path: Path) -> ExportReader:
-    """A reader of ``path`` after checking its header; ``DamagedExport`` if it is not
-    a hand-carry file at all."""
-    for number, line in _lines(path, start=1):
-        header = _parse(path, number, line)
-        if header.get("phytrace_export") != FORMAT_VERSION:
-            raise DamagedExport(str(path), number, "not a phytrace-edge export (no header)")
-        return ExportReader(path, header)
-    raise DamagedExport(str(path), 1, "empty file")
-
-
-def _lines(path: Path, start: int) -> Iterator[tuple[int, bytes]]:
-    """The file's decompressed lines with their numbers, from line ``start``."""
-    number = 0
-    try:
-        with path.open("rb") as raw:
-            reader = zstandard.ZstdDecompressor().stream_reader(raw, read_across_frames=True)
-            for number, line in enumerate(io.BufferedReader(reader), start=1):
-                if len(line) > LINE_MAX_BYTES:
-                    raise DamagedExport(str(path), number, "a line longer than 16 MiB")
-                if number >= start:
-                    yield number, line
-    except zstandard.ZstdError as exc:
-        raise DamagedExport(str(path), number + 1, f"not readable zstd ({exc})") from None
-
-
-def _parse(path: Path, number: int, line: bytes) -> dict[str, Any]:
-    if not line.endswith(b"\n"):
-        raise DamagedExport(str(path), number, "cut off (truncated)")
-    try:
-        document = orjson.loads(line)
-    except orjson.JSONDecodeError as exc:
-        raise DamagedExport(str(path), number, f"not JSON ({exc})") from None
-    if not isinstance(document, dict):
-        raise DamagedExport(str(path), number, "not a JSON object")
-    return document
-
-
-def _check_manifest(
-    path: Path, number: int, document: dict[str, Any], count: int, digest: Any
-) -> Manifest:
-    try:
-        manifest = Manifest(**document["manifest"])
-    except TypeError:
-        raise DamagedExport(str(path), number, "a manifest of the wrong shape") from None
-    if manifest.events != count:
-        raise DamagedExport(
-            str(path), number, f"the manifest counts {manifest.events} events, the file has {count}"
-        )
-    if manifest.sha256 != digest.hexdigest():
-        raise DamagedExport(str(path), number, "the checksum does not match the events")
-    return manifest
+    """A reader of ``path`` (MCAP) after checking its header; ``NotAnExport`` if it is
+    not a hand-carry file, ``DamagedExport`` if not even the header can be read."""
+    for offset, record in _records(path):
+        if not isinstance(record, Header):  # the MCAP format puts it first
+            raise NotAnExport(str(path), f"byte {offset}", "an MCAP file without a header")
+        _check_profile(str(path), offset, record)
+        return ExportReader(path)
+    raise DamagedExport(str(path), "byte 8", "the file ends after its magic (truncated)")

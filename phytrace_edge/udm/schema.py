@@ -98,3 +98,39 @@ def check_event(event: Any, logger: logging.Logger = log) -> bool:
 
 def _event_id(event: Any) -> str:
     return str(event.get("event_id", "?")) if isinstance(event, dict) else "?"
+
+
+def event_type_schema(event_type: str) -> dict[str, Any]:
+    """The UDM schema of one event type, standing alone: the definitions that type
+    refers to (directly or through others) and nothing else, so a reader of one
+    channel of a hand-carry file gets a schema it can compile by itself. A type the
+    schema does not define gets the whole schema."""
+    schema = load_schema()
+    definitions = schema["definitions"]
+    if event_type not in definitions:
+        return schema
+    needed: dict[str, Any] = {}
+    waiting = [event_type]
+    while waiting:
+        name = waiting.pop()
+        if name not in needed:
+            needed[name] = definitions[name]
+            waiting.extend(_local_refs(definitions[name]))
+    base = schema["$id"].removesuffix(".schema.json")
+    return {
+        "$schema": schema["$schema"],
+        "$id": f"{base}/{event_type}.schema.json",
+        "title": f"{schema['title']}: {event_type}",
+        "allOf": [{"$ref": f"#/definitions/{event_type}"}],
+        "definitions": dict(sorted(needed.items())),
+    }
+
+
+def _local_refs(node: Any) -> list[str]:
+    """The names of the definitions ``node`` refers to (``#/definitions/name``)."""
+    if isinstance(node, dict):
+        own = [node["$ref"].rsplit("/", 1)[-1]] if "$ref" in node else []
+        return own + [name for value in node.values() for name in _local_refs(value)]
+    if isinstance(node, list):
+        return [name for item in node for name in _local_refs(item)]
+    return []

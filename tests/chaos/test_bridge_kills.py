@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from phytrace_edge._version import __version__
 from tests.bridge import bridge_settings
 from tests.chaos.test_stub_outages import drain_rest
 from tests.processes import BridgeProcess, wait_for
@@ -65,7 +66,7 @@ def test_bridge_killed_during_sends_loses_nothing(tmp_path: Path, stub_factory) 
     bridge = BridgeProcess(log, **env).start()
     # its start-up line is logged once the signal handlers are in place
     wait_for(
-        lambda: log.read_text().count("phytrace-edge 0.1") == KILLS + 1,
+        lambda: log.read_text().count(f"phytrace-edge {__version__}:") == KILLS + 1,
         30,
         "the last bridge to start",
     )

@@ -1,7 +1,7 @@
-"""Hand-carry: a robot without a network exports its backlog to files, another machine
-imports them, and PhyCloud (the real stub) holds every event exactly once, also when a
-file is imported twice, when an export is SIGKILLed mid-file, and when a file is
-damaged (real queue files, real subprocesses, real HTTP)."""
+"""Hand-carry: a robot without a network exports its backlog to MCAP files, another
+machine imports them, and PhyCloud (the real stub) holds every event of every type
+exactly once, also when a file is imported twice, when an export is SIGKILLed mid-file,
+and when a file is damaged (real queue files, real subprocesses, real HTTP)."""
 
 from __future__ import annotations
 
@@ -11,27 +11,22 @@ import subprocess
 import sys
 from pathlib import Path
 
-import zstandard
+from mcap.reader import make_reader
 
-from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.handcarry import open_export
+from phytrace_edge.ship.export import open_handcarry
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
+from tests.udm_events import every_type
 
 IDENTITY = {"source_id": "mine-amr-3", "source_type": "amr"}
 START_S = 1_795_300_000.0
 
 
 def fill_robot_queue(path: Path, count: int) -> list[str]:
-    """A robot's backlog of ``count`` valid UDM events (a day in a mine); their ids."""
-    events = [
-        {
-            **envelope(IDENTITY, "telemetry.periodic", START_S + i * 0.2),
-            "power": {"battery": {"voltage_v": 24.0 + (i % 10) / 10}},
-        }
-        for i in range(count)
-    ]
+    """A robot's backlog of ``count`` valid UDM events of every type (a day in a mine);
+    their ids."""
+    events = every_type(count, IDENTITY, START_S)
     with QueueStore.open(path) as store:
         for start in range(0, count, 5000):
             store.put_many(events[start : start + 5000])
@@ -55,18 +50,18 @@ def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_pat
     queue = tmp_path / "robot.db"
     ids = fill_robot_queue(queue, 3000)
     first = run_cli(
-        "export", "--out", str(tmp_path / "stick1.phx"), "--max-bytes", "64KiB", **robot(queue)
+        "export", "--out", str(tmp_path / "stick1.mcap"), "--max-bytes", "64KiB", **robot(queue)
     )
     assert first.returncode == 1, first.stderr  # events are left for the next stick
     assert "left in the queue: run export again" in first.stdout
-    second = run_cli("export", "--out", str(tmp_path / "stick2.phx"), **robot(queue))
+    second = run_cli("export", "--out", str(tmp_path / "stick2.mcap"), **robot(queue))
     assert second.returncode == 0, second.stderr
     assert "the queue is empty" in second.stdout
-    sticks = [tmp_path / "stick1.phx", tmp_path / "stick2.phx"]
+    sticks = [tmp_path / "stick1.mcap", tmp_path / "stick2.mcap"]
     assert sticks[0].stat().st_size <= 64 * 1024
     manifests = []
     for stick in sticks:
-        reader = open_export(stick)
+        reader = open_handcarry(stick)
         list(reader.events())
         manifests.append(reader.manifest)
     assert manifests[0].source_id == "mine-amr-3"
@@ -87,8 +82,8 @@ def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_pat
 def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_path, stub) -> None:
     queue = tmp_path / "robot.db"
     ids = fill_robot_queue(queue, 30_000)
-    out = tmp_path / "stick.phx"
-    part = tmp_path / "stick.phx.part"
+    out = tmp_path / "stick.mcap"
+    part = tmp_path / "stick.mcap.part"
     export = subprocess.Popen(
         [sys.executable, "-m", "phytrace_edge", "export", "--out", str(out)],
         env=python_env(**robot(queue)),
@@ -97,7 +92,8 @@ def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_pat
     )
     try:
         wait_for(
-            lambda: part.exists() and part.stat().st_size > 8192,
+            # a few whole chunks (one per batch of 500, ~30 KiB), so the part holds events
+            lambda: part.exists() and part.stat().st_size > 256 * 1024,
             60,
             "the export to write",
             every=0.005,
@@ -113,33 +109,38 @@ def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_pat
     assert 0 < len(stub.event_ids()) < 30_000
 
     # and exports again: the killed export's claims come back, nothing was deleted
-    again = run_cli("export", "--out", str(tmp_path / "stick-again.phx"), **robot(queue))
+    again = run_cli("export", "--out", str(tmp_path / "stick-again.mcap"), **robot(queue))
     assert again.returncode == 0, again.stderr
     assert "exported 30000 event(s)" in again.stdout
     imported = run_cli(
-        "import", str(tmp_path / "stick-again.phx"), timeout=300, **laptop(tmp_path, stub)
+        "import", str(tmp_path / "stick-again.mcap"), timeout=300, **laptop(tmp_path, stub)
     )
     assert imported.returncode == 0, imported.stderr
     assert sorted(stub.event_ids()) == sorted(ids)
 
 
-def test_a_damaged_file_is_imported_up_to_its_first_bad_line(tmp_path, stub) -> None:
+def test_a_damaged_file_is_imported_up_to_its_first_bad_record(tmp_path, stub) -> None:
     queue = tmp_path / "robot.db"
     ids = fill_robot_queue(queue, 1000)
-    stick = tmp_path / "stick.phx"
+    stick = tmp_path / "stick.mcap"
     assert run_cli("export", "--out", str(stick), **robot(queue)).returncode == 0
-    lines = zstandard.ZstdDecompressor().stream_reader(stick.read_bytes()).read().splitlines(True)
-    lines[401] = b'{"event_id": "cut here\n'  # line 402: the header, then events 1..400 are good
-    damaged = tmp_path / "damaged.phx"
-    damaged.write_bytes(zstandard.ZstdCompressor().compress(b"".join(lines)))
-    before = damaged.read_bytes()
+    with stick.open("rb") as raw:
+        summary = make_reader(raw).get_summary()
+    assert summary is not None and len(summary.chunk_indexes) == 2  # a chunk per batch of 500
+    second = summary.chunk_indexes[1].chunk_start_offset
+    data = bytearray(stick.read_bytes())
+    data[second + 400] ^= 0xFF  # a flipped bit in the second chunk's events
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
 
     result = run_cli("import", str(damaged), **laptop(tmp_path, stub))
     assert result.returncode == 1
-    assert f"{damaged}: line 402: not JSON" in result.stderr
-    assert "the 400 event(s) before it were sent" in result.stderr
-    assert sorted(stub.event_ids()) == sorted(ids[:400])
-    assert damaged.read_bytes() == before  # nothing is deleted or changed
+    assert f"{damaged}: byte {second}: cannot be read" in result.stderr
+    assert "the 500 event(s) before it were sent" in result.stderr
+    assert sorted(stub.event_ids()) == sorted(ids[:500])
+    assert damaged.read_bytes() == bytes(data)  # nothing is deleted or changed
+    checked = run_cli("inspect", str(damaged))
+    assert checked.returncode == 1 and f"byte {second}" in checked.stdout, checked.stdout
 
     # the whole file, from the robot's stick, completes it
     assert run_cli("import", str(stick), **laptop(tmp_path, stub)).returncode == 0

@@ -15,6 +15,7 @@ import httpx
 import orjson
 import pytest
 
+from phytrace_edge._version import __version__
 from phytrace_edge.cli.run import DUPLICATE_SIGNAL_S
 from tests.processes import BridgeProcess, free_port, run_cli, status_json, wait_for
 
@@ -181,7 +182,7 @@ def test_a_second_signal_exits_at_once_and_the_queue_stays_sound(
     env = env_for(tmp_path, stub.endpoint, SHUTDOWN_GRACE_S="60", HTTP_TIMEOUT_S="60")
     log = tmp_path / "bridge.log"
     bridge = BridgeProcess(log, **env).start()
-    wait_for(lambda: "phytrace-edge 0.1" in log.read_text(), 30, "start-up")
+    wait_for(lambda: f"phytrace-edge {__version__}:" in log.read_text(), 30, "start-up")
     wait_for(lambda: status(env)[1].get("queue", {}).get("depth", 0) > 5, 30, "queued events")
     bridge.signal(signal.SIGTERM)
     first = time.monotonic()

@@ -36,6 +36,7 @@ ROSDEP_KEYS = {
     "tomli": None,  # Python < 3.11 only; ROS 2 Jazzy runs 3.12
     "tqdm": "python3-tqdm",
     "prometheus-client": "python3-prometheus-client",
+    "mcap": None,
 }
 ROS_DEPENDENCIES = {
     "rclpy",

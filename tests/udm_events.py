@@ -1,0 +1,51 @@
+"""Valid UDM events of every event type, for tests that carry events through a stage
+without caring what they say (the hand-carry round trips)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from phytrace_edge.builder.envelope import envelope
+
+EVENT_TYPES = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health")
+
+
+def udm_event(event_type: str, identity: dict[str, str], at_s: float, n: int) -> dict[str, Any]:
+    """One valid event of ``event_type`` captured at ``at_s``; ``n`` varies its body."""
+    event = envelope(identity, event_type, at_s)
+    if event_type == "telemetry.periodic":
+        body: dict[str, Any] = {"power": {"battery": {"voltage_v": 24.0 + (n % 10) / 10}}}
+    elif event_type == "telemetry.topic":
+        body = {
+            "topic": "/motor/temperature",
+            "type": "sensor_msgs/msg/Temperature",
+            "mode": "sample",
+            "data": {"temperature": 40.0 + n % 7, "variance": 0.0},
+            "age_s": 0.1,
+            "clock": "epoch",
+        }
+    elif event_type == "log.record":
+        body = {
+            "level": "warn",
+            "logger": "nav2.controller",
+            "message": f"slow loop {n}",
+            "clock": "epoch",
+        }
+    else:
+        body = {
+            "trigger": "interval",
+            "healthy": True,
+            "problems": [],
+            "version": "0.2.0",
+            "uptime_s": float(n),
+            "queue": {"depth": n, "bytes": 4096},
+        }
+    return {**event, **body}
+
+
+def every_type(count: int, identity: dict[str, str], start_s: float) -> list[dict[str, Any]]:
+    """``count`` events, the four types in turn, 0.2 s apart."""
+    return [
+        udm_event(EVENT_TYPES[i % len(EVENT_TYPES)], identity, start_s + i * 0.2, i)
+        for i in range(count)
+    ]
