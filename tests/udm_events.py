@@ -43,9 +43,11 @@ def udm_event(event_type: str, identity: dict[str, str], at_s: float, n: int) ->
     return {**event, **body}
 
 
-def every_type(count: int, identity: dict[str, str], start_s: float) -> list[dict[str, Any]]:
-    """``count`` events, the four types in turn, 0.2 s apart."""
+def every_type(
+    count: int, identity: dict[str, str], start_s: float, step_s: float = 0.2
+) -> list[dict[str, Any]]:
+    """``count`` events, the four types in turn, ``step_s`` apart."""
     return [
-        udm_event(EVENT_TYPES[i % len(EVENT_TYPES)], identity, start_s + i * 0.2, i)
+        udm_event(EVENT_TYPES[i % len(EVENT_TYPES)], identity, start_s + i * step_s, i)
         for i in range(count)
     ]

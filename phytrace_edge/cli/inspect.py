@@ -64,7 +64,7 @@ def _describe(report: FileReport) -> str:
         f"phytrace-edge {header.get('bridge_version', '?')} at {header.get('created_at', '?')}",
         f"  robot        {header.get('source_id', '?')}",
         f"  events       {report.events}" + (f" ({per_type})" if per_type else ""),
-        f"  captured     {report.first_captured_at} to {report.last_captured_at}",
+        f"  captured     {report.first_captured_at or '-'} to {report.last_captured_at or '-'}",
         f"  schema       UDM {header.get('schema_version', '?')}",
     ]
     if manifest is not None:

@@ -7,7 +7,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from phytrace_edge.ship import handcarry
+from phytrace_edge.ship import handcarry_reader
 from phytrace_edge.ship.export import open_handcarry
 from phytrace_edge.ship.handcarry import DamagedExport, Manifest
 from phytrace_edge.udm.event import parse_timestamp
@@ -37,7 +37,7 @@ def inspect_file(path: Path) -> FileReport:
     """Read ``path`` through: counts, captured range, checks; ``NotAnExport`` if it is
     not a hand-carry file."""
     reader = open_handcarry(path)
-    mcap = isinstance(reader, handcarry.ExportReader)
+    mcap = isinstance(reader, handcarry_reader.ExportReader)
     report = FileReport(str(path), "MCAP" if mcap else "phx (0.1.0)", {})
     first = last = None
     try:

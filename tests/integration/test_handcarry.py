@@ -14,7 +14,7 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.export import open_handcarry
+from phytrace_edge.ship.export import BATCH_EVENTS, open_handcarry
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
 from tests.udm_events import every_type
@@ -92,7 +92,7 @@ def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_pat
     )
     try:
         wait_for(
-            # a few whole chunks (one per batch of 500, ~30 KiB), so the part holds events
+            # a whole chunk or more (one per batch, ~120 KiB), so the part holds events
             lambda: part.exists() and part.stat().st_size > 256 * 1024,
             60,
             "the export to write",
@@ -121,12 +121,12 @@ def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_pat
 
 def test_a_damaged_file_is_imported_up_to_its_first_bad_record(tmp_path, stub) -> None:
     queue = tmp_path / "robot.db"
-    ids = fill_robot_queue(queue, 1000)
+    ids = fill_robot_queue(queue, BATCH_EVENTS + 1000)
     stick = tmp_path / "stick.mcap"
     assert run_cli("export", "--out", str(stick), **robot(queue)).returncode == 0
     with stick.open("rb") as raw:
         summary = make_reader(raw).get_summary()
-    assert summary is not None and len(summary.chunk_indexes) == 2  # a chunk per batch of 500
+    assert summary is not None and len(summary.chunk_indexes) == 2  # a chunk per batch
     second = summary.chunk_indexes[1].chunk_start_offset
     data = bytearray(stick.read_bytes())
     data[second + 400] ^= 0xFF  # a flipped bit in the second chunk's events
@@ -136,8 +136,8 @@ def test_a_damaged_file_is_imported_up_to_its_first_bad_record(tmp_path, stub) -
     result = run_cli("import", str(damaged), **laptop(tmp_path, stub))
     assert result.returncode == 1
     assert f"{damaged}: byte {second}: cannot be read" in result.stderr
-    assert "the 500 event(s) before it were sent" in result.stderr
-    assert sorted(stub.event_ids()) == sorted(ids[:500])
+    assert f"the {BATCH_EVENTS} event(s) before it were sent" in result.stderr
+    assert sorted(stub.event_ids()) == sorted(ids[:BATCH_EVENTS])
     assert damaged.read_bytes() == bytes(data)  # nothing is deleted or changed
     checked = run_cli("inspect", str(damaged))
     assert checked.returncode == 1 and f"byte {second}" in checked.stdout, checked.stdout

@@ -44,7 +44,8 @@ def node_reader() -> list[str]:
 def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Path) -> None:
     command = node_reader()
     queue = tmp_path / "robot.db"
-    events = every_type(4000, {"source_id": "mine-amr-3", "source_type": "amr"}, 1_795_300_000.0)
+    identity = {"source_id": "mine-amr-3", "source_type": "amr"}
+    events = every_type(4000, identity, 1_795_300_000.0, step_s=0.137)  # odd milliseconds
     with QueueStore.open(queue) as store:
         store.put_many(events)
     settings = {"QUEUE_PATH": str(queue), "SOURCE_ID": "mine-amr-3"}

@@ -4,8 +4,10 @@ by the byte offset of its first bad record, with the events before it kept."""
 
 from __future__ import annotations
 
+import calendar
 import struct
 import tempfile
+import time
 from pathlib import Path
 
 import fastjsonschema
@@ -18,13 +20,8 @@ from mcap.writer import Writer
 
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.export import export_backlog, open_handcarry
-from phytrace_edge.ship.handcarry import (
-    DamagedExport,
-    ExportWriter,
-    NotAnExport,
-    open_export,
-)
-from phytrace_edge.udm.event import parse_timestamp
+from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, NotAnExport
+from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.schema import event_type_schema
 from tests.udm_events import EVENT_TYPES, every_type
 
@@ -36,7 +33,8 @@ PER_CHUNK = 100
 def write_file(path: Path, count: int) -> list[bytes]:
     """A file of ``count`` events of every type, a chunk per 100 (as export writes a
     chunk per batch); the events' JSON."""
-    jsons = [orjson.dumps(event) for event in every_type(count, IDENTITY, START_S)]
+    # odd milliseconds: a stamp a float cannot hold to the nanosecond
+    jsons = [orjson.dumps(e) for e in every_type(count, IDENTITY, START_S, step_s=0.137)]
     writer = ExportWriter(path, "amr-1", START_S + 3600)
     for i, event_json in enumerate(jsons):
         writer.write(100 + i, event_json, START_S + i * 0.2 + 0.5)
@@ -45,6 +43,12 @@ def write_file(path: Path, count: int) -> list[bytes]:
     manifest = writer.finish()
     assert (manifest.events, manifest.first_id, manifest.last_id) == (count, 100, 99 + count)
     return jsons
+
+
+def exact_ns(stamp: str) -> int:
+    """``2026-11-21T22:26:40.137Z`` in nanoseconds, in integers only."""
+    seconds = calendar.timegm(time.strptime(stamp[:19], "%Y-%m-%dT%H:%M:%S"))
+    return seconds * 10**9 + int(stamp[20:23]) * 10**6
 
 
 def read_all(path: Path) -> tuple[list[dict], DamagedExport | None]:
@@ -94,7 +98,7 @@ def test_a_whole_file_reads_back_in_our_reader_and_the_mcap_library(tmp_path: Pa
         assert channel.topic == event["event_type"] and channel.message_encoding == "json"
         assert schema is not None and schema.encoding == "jsonschema"
         assert orjson.loads(schema.data) == event_type_schema(channel.topic)
-        assert message.log_time == round(parse_timestamp(event["captured_at"]) * 1e9)
+        assert message.log_time == exact_ns(event["captured_at"])
         assert message.publish_time == round((START_S + i * 0.2 + 0.5) * 1e9)
         assert message.sequence == 100 + i
     assert metadata["phytrace.manifest"]["events"] == "250"

@@ -22,7 +22,7 @@ from phytrace_edge.queue.repair import stamped_before
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.ship.export import export_backlog
-from phytrace_edge.ship.handcarry import open_export
+from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs
