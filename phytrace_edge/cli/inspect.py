@@ -58,7 +58,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
 
 def _describe(report: FileReport) -> str:
     header, manifest = report.header, report.manifest
-    per_type = ", ".join(f"{name} {count}" for name, count in report.per_type.most_common())
+    per_type = ", ".join(f"{name} {count}" for name, count in report.per_type.items())
     lines = [
         f"{report.path}: phytrace-edge hand-carry file ({report.format}), written by "
         f"phytrace-edge {header.get('bridge_version', '?')} at {header.get('created_at', '?')}",

@@ -21,7 +21,7 @@ class FileReport:
     format: str  # "MCAP" or "phx (0.1.0)"
     header: dict[str, str]
     events: int = 0
-    per_type: Counter[str] = field(default_factory=Counter)
+    per_type: dict[str, int] = field(default_factory=dict)  # most first
     first_captured_at: str | None = None
     last_captured_at: str | None = None
     manifest: Manifest | None = None
@@ -40,10 +40,11 @@ def inspect_file(path: Path) -> FileReport:
     mcap = isinstance(reader, handcarry_reader.ExportReader)
     report = FileReport(str(path), "MCAP" if mcap else "phx (0.1.0)", {})
     first = last = None
+    per_type: Counter[str] = Counter()
     try:
         for event in reader.events():
             report.events += 1
-            report.per_type[str(event.get("event_type", "?"))] += 1
+            per_type[str(event.get("event_type", "?"))] += 1
             captured = _captured(event.get("captured_at"))
             if captured is not None:
                 if first is None or captured[0] < first[0]:
@@ -52,6 +53,7 @@ def inspect_file(path: Path) -> FileReport:
                     last = captured
     except DamagedExport as damage:
         report.damage = f"{damage.where}: {damage.reason}"
+    report.per_type = dict(per_type.most_common())
     report.header = {key: str(value) for key, value in reader.header.items()}
     report.manifest, report.checks = reader.manifest, list(reader.checks)
     report.first_captured_at = first[1] if first else None

@@ -5,6 +5,7 @@ and when a file is damaged (real queue files, real subprocesses, real HTTP)."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -17,7 +18,7 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.export import BATCH_EVENTS, open_handcarry
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
-from tests.udm_events import every_type
+from tests.udm_events import EVENT_TYPES, every_type
 
 IDENTITY = {"source_id": "mine-amr-3", "source_type": "amr"}
 START_S = 1_795_300_000.0
@@ -161,3 +162,27 @@ def test_an_out_file_that_exists_or_has_no_folder_is_a_bad_argument(tmp_path: Pa
     assert taken.read_bytes() == b"someone else's file"
     with QueueStore.open(queue) as store:
         assert store.counter("depth") == 3
+
+
+def test_inspect_says_whole_damaged_or_not_an_export_by_its_exit_code(tmp_path: Path) -> None:
+    queue = tmp_path / "robot.db"
+    fill_robot_queue(queue, 40)
+    stick = tmp_path / "stick.mcap"
+    assert run_cli("export", "--out", str(stick), **robot(queue)).returncode == 0
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(stick.read_bytes()[:-200])  # the summary's tail is gone
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not an export\n")
+
+    whole = run_cli("inspect", "--json", str(stick))
+    assert whole.returncode == 0, whole.stderr
+    report = json.loads(whole.stdout)
+    assert report["whole"] and report["events"] == 40 and report["damage"] is None
+    assert report["per_type"] == dict.fromkeys(EVENT_TYPES, 10)
+    assert report["manifest"]["source_id"] == IDENTITY["source_id"]
+    damaged = run_cli("inspect", str(stick), str(cut))
+    assert damaged.returncode == 1
+    assert "whole: an import delivers all 40 event(s)" in damaged.stdout
+    assert "damaged: an import delivers the 40 event(s) before the damage" in damaged.stdout
+    foreign = run_cli("inspect", str(stick), str(notes))
+    assert foreign.returncode == 2 and "not a phytrace-edge export" in foreign.stderr
