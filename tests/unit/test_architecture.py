@@ -277,7 +277,12 @@ def test_modules_stay_small_enough_to_read_in_one_sitting() -> None:
         module_name(path): len(path.read_text("utf-8").splitlines())
         for path in PACKAGE.rglob("*.py")
     }
-    # the IDL types and the mock's message classes are tables, not logic
-    tables = {"phytrace_edge.ingest.sources.dds_types", "phytrace_edge.sim.mock_ros.messages"}
+    # the IDL types and the mock's message classes are tables, not logic; the validator
+    # is generated from the schema (tools/generate_validator.py), not read
+    tables = {
+        "phytrace_edge.ingest.sources.dds_types",
+        "phytrace_edge.sim.mock_ros.messages",
+        "phytrace_edge.udm.validator_generated",
+    }
     large = {m: n for m, n in sizes.items() if n > 400 and m not in tables}
     assert not large, large

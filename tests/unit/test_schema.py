@@ -162,3 +162,24 @@ def test_the_stub_and_the_bridge_agree_on_validity() -> None:
             assert ours.path == theirs.path
 
     agree()
+
+
+def test_the_generated_validator_is_fresh_and_is_the_one_used(monkeypatch) -> None:
+    """tools/generate_validator.py made it from today's schema file, so the bridge
+    imports it instead of compiling at start; a stale one is not used."""
+    import phytrace_edge.udm.schema as schema
+    from phytrace_edge.udm import validator_generated
+
+    assert schema.schema_sha256() == validator_generated.SCHEMA_SHA256, (
+        "run tools/generate_validator.py"
+    )
+    schema._compiled.cache_clear()
+    try:
+        assert schema._compiled().__module__ == validator_generated.__name__
+        monkeypatch.setattr(validator_generated, "SCHEMA_SHA256", "0" * 64)
+        schema._compiled.cache_clear()
+        compiled = schema._compiled()
+        assert compiled.__module__ != validator_generated.__name__
+        assert schema.find_violation({"event_type": "telemetry.periodic"}) is not None
+    finally:
+        schema._compiled.cache_clear()
