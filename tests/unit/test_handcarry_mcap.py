@@ -23,6 +23,7 @@ from phytrace_edge.ship.export import export_backlog, open_handcarry
 from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, NotAnExport
 from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.schema import event_type_schema
+from tests.handcarry_files import read_all
 from tests.udm_events import EVENT_TYPES, every_type
 
 IDENTITY = {"source_id": "amr-1", "source_type": "amr"}
@@ -49,16 +50,6 @@ def exact_ns(stamp: str) -> int:
     """``2026-11-21T22:26:40.137Z`` in nanoseconds, in integers only."""
     seconds = calendar.timegm(time.strptime(stamp[:19], "%Y-%m-%dT%H:%M:%S"))
     return seconds * 10**9 + int(stamp[20:23]) * 10**6
-
-
-def read_all(path: Path) -> tuple[list[dict], DamagedExport | None]:
-    events: list[dict] = []
-    try:
-        for event in open_export(path).events():
-            events.append(event)
-    except DamagedExport as damage:
-        return events, damage
-    return events, None
 
 
 def chunk_offsets(path: Path) -> list[int]:

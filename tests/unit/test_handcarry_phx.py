@@ -11,8 +11,9 @@ import pytest
 import zstandard
 
 from phytrace_edge.ship.export import open_handcarry
-from phytrace_edge.ship.handcarry import DamagedExport, NotAnExport
+from phytrace_edge.ship.handcarry import NotAnExport
 from phytrace_edge.ship.handcarry_phx import open_export
+from tests.handcarry_files import read_all
 
 FIXTURES = Path(__file__).parents[1] / "data" / "upgrade"
 WRITTEN = FIXTURES / "0.1.0-last.phx"
@@ -26,16 +27,6 @@ def lines_of(path: Path) -> list[bytes]:
 
 def rewrite(path: Path, lines: list[bytes]) -> None:
     path.write_bytes(zstandard.ZstdCompressor().compress(b"".join(lines)))
-
-
-def read_all(path: Path) -> tuple[list[dict], DamagedExport | None]:
-    events: list[dict] = []
-    try:
-        for event in open_export(path).events():
-            events.append(event)
-    except DamagedExport as damage:
-        return events, damage
-    return events, None
 
 
 def test_the_file_0_1_0_wrote_reads_back_with_its_manifest() -> None:
