@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from phytrace_edge.ingest.topics import EXTRA_MODES, TOPIC_NAMES, ExtraTopic
+if TYPE_CHECKING:  # the topic table is imported when TOPICS_EXTRA is given (parsers.py)
+    from phytrace_edge.ingest.topics import ExtraTopic
 
 MAX_EXTRA_TOPICS = 64
 MAX_RATE_HZ = 1000.0
@@ -47,6 +48,8 @@ def _text_entry(part: str) -> tuple[str, dict[str, Any]]:
 
 
 def _entry(name: Any, options: Any) -> ExtraTopic:
+    from phytrace_edge.ingest.topics import EXTRA_MODES, TOPIC_NAMES, ExtraTopic
+
     if (
         not isinstance(name, str)
         or not re.fullmatch(_TOPIC, name, re.ASCII)

@@ -14,7 +14,7 @@ standard library (tests/unit/test_startup.py).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from phytrace_edge.builder.defaults import (
     DEFAULT_ROSOUT_BURST,
@@ -25,7 +25,6 @@ from phytrace_edge.builder.defaults import (
 )
 from phytrace_edge.config.extra_topics import topics_extra
 from phytrace_edge.config.parsers import (
-    KNOWN_TOPICS,
     boolean,
     bridge_input,
     byte_size,
@@ -33,6 +32,7 @@ from phytrace_edge.config.parsers import (
     http_url,
     identifier,
     int_between,
+    known_topics,
     log_level,
     namespace,
     non_negative_float,
@@ -47,11 +47,13 @@ from phytrace_edge.config.parsers import (
 )
 from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY, DEFAULT_REPLAY_RATE
 from phytrace_edge.ingest.qos import QosChoice
-from phytrace_edge.ingest.topics import ExtraTopic
 from phytrace_edge.queue import defaults as queue
 from phytrace_edge.redact import Secret
 from phytrace_edge.ship import defaults as ship
 from phytrace_edge.units import KIB, MIB
+
+if TYPE_CHECKING:  # the topic table: imported when a topic setting is given
+    from phytrace_edge.ingest.topics import ExtraTopic
 
 SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
 DEFAULT_SHUTDOWN_GRACE_S = 5.0
@@ -237,7 +239,9 @@ class Settings:
         over the namespace)."""
         remap = self.topic_remap or {}
         prefix = self.topic_namespace or ""
-        return {t: remap.get(t, prefix + t) for t in KNOWN_TOPICS if t not in self.topics_disabled}
+        return {
+            t: remap.get(t, prefix + t) for t in known_topics() if t not in self.topics_disabled
+        }
 
     @property
     def extra_topics(self) -> dict[str, str]:

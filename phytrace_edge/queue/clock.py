@@ -21,8 +21,6 @@ A step of the wall clock is seen as a change of ``wall - CLOCK_BOOTTIME`` larger
 (docs/queue.md, "Time").
 """
 
-from __future__ import annotations
-
 import sqlite3
 import time
 from collections.abc import Callable

@@ -11,7 +11,7 @@ import pytest
 
 from phytrace_edge.cli import main
 from phytrace_edge.config import load_settings, setting_infos, settings_from_environment
-from phytrace_edge.config.parsers import KNOWN_TOPICS
+from phytrace_edge.config.parsers import known_topics
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.redact import Secret
 from phytrace_edge.units import GIB, MIB
@@ -141,7 +141,7 @@ def test_topic_remap_and_disable_shape_the_topic_set() -> None:
     assert s.topics["/odom"] == "/wheel/odom"
     assert s.topics["/scan"] == "/front/scan"
     assert "/gps/fix" not in s.topics
-    assert len(s.topics) == len(KNOWN_TOPICS) - 1
+    assert len(s.topics) == len(known_topics()) - 1
 
 
 def test_state_dir_follows_systemd_then_container_then_xdg() -> None:
