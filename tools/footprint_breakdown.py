@@ -89,6 +89,47 @@ def queue_work(folder: Path) -> object:
     return store
 
 
+def give_back_free_memory() -> None:
+    from phytrace_edge.host_memory import give_back_free_memory as trim
+
+    trim()
+
+
+def thread_contexts(kept: list[object]) -> Callable[[], None]:
+    """What ``queue.codecs`` holds per thread: the dictionary compressor (level 3) and
+    a decompressor (python-zstandard's contexts must not be shared between threads)."""
+
+    def make() -> None:
+        import zstandard
+
+        from phytrace_edge.queue.codecs import ZSTD_LEVEL, packaged_dictionary
+
+        dictionary = zstandard.ZstdCompressionDict(packaged_dictionary()[1])
+        compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, dict_data=dictionary)
+        frame = compressor.compress(b'{"event_id": "x", "pad": "%s"}' % (b"y" * 3000))
+        decompressor = zstandard.ZstdDecompressor(dict_data=dictionary)
+        decompressor.decompress(frame)
+        kept.extend([compressor, decompressor])
+        give_back_free_memory()  # what the contexts hold, not the buffers of the call
+
+    return make
+
+
+def wire(kept: list[object]) -> Callable[[], None]:
+    """``ship.request.BodyEncoder`` for zstd, used on a 500-event body (gzip keeps no
+    context between requests)."""
+
+    def make() -> None:
+        from phytrace_edge.ship.request import BodyEncoder
+
+        encoder = BodyEncoder("zstd")
+        encoder.encode(b"[" + b",".join([b'{"pad": "%s"}' % (b"y" * 3400)] * 500) + b"]")
+        kept.append(encoder)
+        give_back_free_memory()
+
+    return make
+
+
 def main() -> None:
     steps = Steps()
     steps.step(
@@ -110,7 +151,6 @@ def main() -> None:
             "phytrace_edge.ingest.sources.sim",
         ),
     )
-    from phytrace_edge.host_memory import give_back_free_memory
     from phytrace_edge.udm.schema import prepare_validator
 
     before_peak = peak_mib()
@@ -122,6 +162,9 @@ def main() -> None:
             "queue: 20,000 events put, claimed, acked", lambda: queue_work(Path(folder))
         )
         steps.step("free heap handed back (after a maintenance pass)", give_back_free_memory)
+        kept: list[object] = []
+        steps.step("zstd contexts of one more thread writing to the queue", thread_contexts(kept))
+        steps.step("a wire compressor (HTTP_COMPRESSION=zstd), one per sending thread", wire(kept))
         import httpx
 
         # as ship/transport.py makes them: no SSL context for an http endpoint
