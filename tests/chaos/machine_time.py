@@ -23,7 +23,7 @@ import sys
 import time
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import pytest
 
@@ -118,18 +118,31 @@ def stopped_and_counted(bridge: BridgeProcess, queue: Path, phycloud: StubProces
     return final
 
 
-def stamps_at(phycloud: StubProcess, stepped_at: float) -> tuple[list[dict], list[float]]:
-    """(the ``wall_clock`` of each event PhyCloud holds stamped before ``stepped_at``
-    and not repaired, the repaired ones' stamps); every repaired stamp must be after
-    it, and every unrepaired old one must say its clock was not synchronized."""
+class Stamps(NamedTuple):
+    """The events PhyCloud holds, by how their ``captured_at`` relates to a step."""
+
+    old: list[dict]  # the wall_clock of each stamped on the old clock and not repaired
+    corrected: list[float]  # the repaired stamps
+    right_before: list[float]  # not repaired, already right, from before the step
+
+
+def stamps_at(phycloud: StubProcess, stepped_at: float) -> Stamps:
+    """The events' stamps around a step at ``stepped_at``; every repaired stamp must be
+    after the old clock's time, and every unrepaired old one must say its clock was
+    not synchronized."""
     stamps = [
         (parse_timestamp(e["captured_at"]), e.get("wall_clock", {})) for e in phycloud.events()
     ]
     old = [clock for at, clock in stamps if at < stepped_at - 3600]
     corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
+    right_before = [
+        at
+        for at, clock in stamps
+        if stepped_at - 3600 <= at < stepped_at and "corrected_by_s" not in clock
+    ]
     assert all(clock == {"synchronized": False} for clock in old), old[:3]
     assert all(at > stepped_at - 3600 for at in corrected)
-    return old, corrected
+    return Stamps(old, corrected, right_before)
 
 
 def queued(queue: Path) -> int:

@@ -68,11 +68,14 @@ def test_a_step_from_2001_to_now_during_an_outage_loses_and_stalls_nothing(
         assert "expired" not in log.read_text()
         if synchronized() is not False:
             return  # only stamps the kernel calls unsynchronized are marked and repaired
-        in_2001, corrected = stamps_at(phycloud, started_at)
+        found = stamps_at(phycloud, started_at)
         # PhyCloud was down at the step: no request got through, so all were repaired,
-        # those the sender held and retried included
-        assert in_2001 == []
-        assert len(corrected) >= before_step.queued_total
+        # those the sender held and retried included. An event whose stamp was already
+        # right needs no repair: once (CI of cf48fcd) one log record came stamped with
+        # the real 2026 time among the 2001 ones, a clock read libfaketime did not fake
+        assert found.old == []
+        assert len(found.corrected) + len(found.right_before) >= before_step.queued_total
+        assert len(found.corrected) >= before_step.queued_total - 2, found.right_before
     finally:
         bridge.stop()
         phycloud.stop()
@@ -106,10 +109,10 @@ def test_a_step_forward_by_years_during_a_drain_sends_each_event_once(
         final = stopped_and_counted(bridge, queue, phycloud)
         assert final.acked_total > 200
         if synchronized() is False:  # marked, so repaired: all but what was on the wire
-            in_2001, corrected = stamps_at(phycloud, stepped_at)
+            found = stamps_at(phycloud, stepped_at)
             sent_before_step = 20 + 2 * 20 + 10  # seen sent, then two requests and a live one
-            assert len(in_2001) <= sent_before_step + 50  # + what went out until the step
-            assert len(corrected) >= 100
+            assert len(found.old) <= sent_before_step + 50  # + what went out until the step
+            assert len(found.corrected) >= 100
     finally:
         bridge.stop()
         phycloud.stop()
