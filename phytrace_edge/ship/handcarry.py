@@ -28,7 +28,6 @@ import functools
 import hashlib
 import os
 from dataclasses import dataclass, fields
-from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import BinaryIO
 
@@ -37,7 +36,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 from phytrace_edge._version import __version__
 from phytrace_edge.durable import sync_folder
-from phytrace_edge.udm.event import format_timestamp, parse_timestamp
+from phytrace_edge.udm.event import format_timestamp, timestamp_ns
 from phytrace_edge.udm.schema import SCHEMA_VERSION, event_type_schema
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -148,9 +147,9 @@ class ExportWriter:
 
     def write(self, queue_id: int, event_json: bytes, queued_at_s: float) -> None:
         """One event as it was queued (``queued_at_s`` in unix seconds)."""
-        event_type, captured_at = _type_and_time(event_json)
+        event_type, captured_at, captured_ns = _type_and_time(event_json)
         queued_ns = _ns(queued_at_s)
-        captured_ns = timestamp_ns(captured_at) if captured_at else queued_ns
+        captured_ns = queued_ns if captured_ns is None else max(0, captured_ns)
         self._mcap.add_message(
             self._channel(event_type), captured_ns, event_json, queued_ns, queue_id % 2**32
         )
@@ -201,38 +200,24 @@ def _schema_sizes() -> dict[str, int]:
     return {name: len(orjson.dumps(event_type_schema(name))) for name in types}
 
 
-def _type_and_time(event_json: bytes) -> tuple[str, str | None]:
-    """The event's type (its channel) and ``captured_at``; the queue holds only JSON
-    objects, so anything else is named rather than refused."""
+def _type_and_time(event_json: bytes) -> tuple[str, str | None, int | None]:
+    """The event's type (its channel), ``captured_at`` and it in nanoseconds (None
+    when it is not a timestamp); the queue holds only JSON objects, so anything else is
+    named rather than refused."""
     try:
         event = orjson.loads(event_json)
     except orjson.JSONDecodeError:
-        return "unknown", None
+        return "unknown", None, None
     if not isinstance(event, dict):
-        return "unknown", None
+        return "unknown", None, None
     event_type, captured_at = event.get("event_type"), event.get("captured_at")
-    if not isinstance(captured_at, str) or not _is_timestamp(captured_at):
-        captured_at = None
-    return (event_type if isinstance(event_type, str) else "unknown"), captured_at
-
-
-def _is_timestamp(text: str) -> bool:
+    event_type = event_type if isinstance(event_type, str) else "unknown"
+    if not isinstance(captured_at, str):
+        return event_type, None, None
     try:
-        parse_timestamp(text)
-    except ValueError:
-        return False
-    return True
-
-
-def timestamp_ns(text: str) -> int:
-    """Nanoseconds since 1970 of a UDM timestamp, exactly: a float of unix seconds
-    holds about 16 digits, and 2026 in nanoseconds has 19 (``captured_at`` as log time
-    would be off by up to 256 ns)."""
-    moment = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    return max(0, (moment - _EPOCH) // timedelta(microseconds=1) * 1000)
-
-
-_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+        return event_type, captured_at, timestamp_ns(captured_at)
+    except ValueError:  # not a time
+        return event_type, None, None
 
 
 def _ns(unix_s: float) -> int:

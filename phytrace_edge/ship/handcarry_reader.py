@@ -62,7 +62,6 @@ class _Walk:
     channels: dict[int, str] = field(default_factory=dict)
     digest: Any = field(default_factory=hashlib.sha256)
     count: int = 0
-    chunk_crcs: int = 0
     data_end: bool = False
     footer: tuple[int, Footer] | None = None
 
