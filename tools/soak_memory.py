@@ -11,6 +11,10 @@ port. Every ``--every-s`` a line: minutes, RSS and anonymous MiB
 (``/proc/<pid>/smaps_rollup``), events waiting, PhyCloud up or down. At the end: the
 median RSS of the first and the last tenth of the run, and the least-squares slope in
 MiB per hour (flat is the goal).
+
+With ``--probe``, the bridge runs under ``tools/soak_probe.py``, which writes the Python
+heap, glibc's heap (used and free) and the fastest-growing allocation sites every minute
+to ``probe.jsonl`` in the run's folder (printed at the end): what the RSS trend is made of.
 """
 
 from __future__ import annotations
@@ -48,14 +52,16 @@ def main() -> None:
     parser.add_argument("--down-s", type=float, default=60, help="each outage this long")
     parser.add_argument("--every-s", type=float, default=30, help="a sample this often")
     parser.add_argument("--warm-up-s", type=float, default=20, help="before the first sample")
+    parser.add_argument("--probe", action="store_true", help="tracemalloc and mallinfo2 inside")
     args = parser.parse_args()
     workdir = Path(tempfile.mkdtemp(prefix="soak-"))
     port = free_port()
     receiver: Receiver | None = Receiver(port=port)
     endpoint = f"http://127.0.0.1:{port}/api/v1"
     env = bridge_env(workdir / "queue.db", endpoint, SAMPLE_RATE_HZ="50")
+    launcher = [str(TOOLS / "soak_probe.py"), str(workdir / "probe.jsonl")] if args.probe else []
     bridge = subprocess.Popen(
-        [sys.executable, "-m", "phytrace_edge", "run", "--input", "sim"],
+        [sys.executable, *(launcher or ["-m", "phytrace_edge"]), "run", "--input", "sim"],
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=(workdir / "bridge.log").open("w"),
@@ -93,6 +99,8 @@ def main() -> None:
     last = statistics.median(y for _, y in points[-tenth:])
     print(f"RSS: first tenth {first:.1f} MiB, last tenth {last:.1f} MiB")
     print(f"slope: {slope_per_hour(points):+.2f} MiB/hour over {len(points)} samples")
+    if args.probe:
+        print(f"probes: {workdir / 'probe.jsonl'}")
 
 
 if __name__ == "__main__":
