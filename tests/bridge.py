@@ -3,6 +3,7 @@ real stub: its settings, the events it built and its status, and a clean stop.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +11,9 @@ from phytrace_edge.config import Settings, load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime import options, wiring
 from phytrace_edge.runtime.health import report, thresholds
+from phytrace_edge.ship.transport import Transport
+
+WrapTransport = Callable[[Transport], Transport]
 
 
 def bridge_settings(tmp_path: Path, endpoint: str, **extra: str) -> Settings:
@@ -31,13 +35,21 @@ def bridge_settings(tmp_path: Path, endpoint: str, **extra: str) -> Settings:
 
 
 class InProcessBridge:
-    """``phytrace-edge run``'s service, wired by the wiring and started."""
+    """``phytrace-edge run``'s service, wired by the wiring and started (unless
+    ``start`` is False: the test looks inside first). ``wrap_transport`` puts a
+    test's fault around the real HTTP transport."""
 
-    def __init__(self, settings: Settings) -> None:
+    def __init__(
+        self, settings: Settings, wrap_transport: WrapTransport | None = None, start: bool = True
+    ) -> None:
         self.settings = settings
         self.built: list[dict[str, Any]] = []  # every event built, in order
-        self.service = wiring.build_service(settings, {}, on_event=self.built.append)
-        self.service.start()
+        transport = wrap_transport(wiring.http_transport(settings)) if wrap_transport else None
+        self.service = wiring.build_service(
+            settings, {}, transport=transport, on_event=self.built.append
+        )
+        if start:
+            self.service.start()
         self._stopped = False
 
     def built_ids(self) -> set[str]:

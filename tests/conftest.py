@@ -79,14 +79,18 @@ def stub(stub_factory):
 
 @pytest.fixture
 def bridge_in_process(tmp_path, stub_factory):
-    """``start(endpoint, **env)``: a bridge service in this process (tests/bridge.py),
-    started; every one stopped at teardown, before the stubs."""
-    from tests.bridge import InProcessBridge, bridge_settings
+    """``start(endpoint, wrap_transport=None, start=True, **env)``: a bridge service in
+    this process (tests/bridge.py), started; every one stopped at teardown, before the
+    stubs."""
+    from tests.bridge import InProcessBridge, WrapTransport, bridge_settings
 
     started: list[InProcessBridge] = []
 
-    def start(endpoint: str, **env: str) -> InProcessBridge:
-        started.append(InProcessBridge(bridge_settings(tmp_path, endpoint, **env)))
+    def start(
+        endpoint: str, wrap_transport: WrapTransport | None = None, start: bool = True, **env: str
+    ) -> InProcessBridge:
+        settings = bridge_settings(tmp_path, endpoint, **env)
+        started.append(InProcessBridge(settings, wrap_transport, start))
         return started[-1]
 
     yield start

@@ -18,15 +18,12 @@ import contextlib
 import itertools
 import sqlite3
 import time
-from pathlib import Path
 
 import httpx
 
 from phytrace_edge.builder.builder import Built
-from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.runtime.options import queue_path
-from phytrace_edge.runtime.wiring import build_service
 from phytrace_edge.udm.event import parse_timestamp
 from tests.processes import wait_for
 
@@ -54,25 +51,13 @@ def carries_a_change(event: dict) -> bool:
 
 
 def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinned(
-    tmp_path: Path, stub
+    stub, bridge_in_process
 ) -> None:
-    settings = load_settings(
-        env={
-            "PHYCLOUD_ENDPOINT": stub.endpoint,
-            "QUEUE_PATH": str(tmp_path / "queue.db"),
-            "QUEUE_MAX_EVENTS": "900",
-            "BRIDGE_INPUT": "sim",
-            "SAMPLE_RATE_HZ": str(RATE_HZ),
-            "BATCH_SIZE": "25",
-            "FLUSH_INTERVAL_S": "0.2",
-            "RETRY_MIN_S": "0.05",
-            "RETRY_MAX_S": "0.5",
-            "HTTP_TIMEOUT_S": "2",
-        }
-    ).settings
-    built: list[dict] = []
+    bridge = bridge_in_process(
+        stub.endpoint, start=False, QUEUE_MAX_EVENTS="900", SAMPLE_RATE_HZ=str(RATE_HZ)
+    )
+    service, built, settings = bridge.service, bridge.built, bridge.settings
     important: set[str] = set()
-    service = build_service(settings, {}, on_event=built.append)
     queue_event = service.outlet.writer.put
 
     def note_class(event: Built, wait: bool = False) -> None:  # the builder's own verdict
@@ -82,24 +67,21 @@ def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinne
 
     service.outlet.writer.put = note_class  # type: ignore[method-assign]
     service.start()
-    try:
-        wait_for(lambda: stub.stats()["unique"] >= 20, 30, "the first events at the stub")
-        stub.kill()
-        killed_at, built_before = time.time(), len(built)
-        wait_for(lambda: len(built) >= built_before + OUTAGE_EVENTS, 120, "a long outage")
-        stats = read_stats(str(queue_path(settings)), time.time())
-        assert stats is not None and stats.drops.get("thinned", 0) > 0, "the cap forced thinning"
-        coarsest = max(
-            1 if band["keeps"] == "all" else int(band["keeps"].split()[-1])
-            for band in stats.resolution
-        )
-        with contextlib.closing(sqlite3.connect(f"file:{stub.db}?mode=ro", uri=True)) as db:
-            received_before = db.execute("SELECT count(*) FROM events").fetchone()[0]
-        back_at = time.time()  # the link is back from the moment the stub listens
-        stub.start()
-        wait_for(lambda: service.store.counter("depth") < 50, 60, "the backlog to drain")
-    finally:
-        service.shutdown(settings.shutdown_grace_s)
+    wait_for(lambda: stub.stats()["unique"] >= 20, 30, "the first events at the stub")
+    stub.kill()
+    killed_at, built_before = time.time(), len(built)
+    wait_for(lambda: len(built) >= built_before + OUTAGE_EVENTS, 120, "a long outage")
+    stats = read_stats(str(queue_path(settings)), time.time())
+    assert stats is not None and stats.drops.get("thinned", 0) > 0, "the cap forced thinning"
+    coarsest = max(
+        1 if band["keeps"] == "all" else int(band["keeps"].split()[-1]) for band in stats.resolution
+    )
+    with contextlib.closing(sqlite3.connect(f"file:{stub.db}?mode=ro", uri=True)) as db:
+        received_before = db.execute("SELECT count(*) FROM events").fetchone()[0]
+    back_at = time.time()  # the link is back from the moment the stub listens
+    stub.start()
+    wait_for(lambda: service.store.counter("depth") < 50, 60, "the backlog to drain")
+    bridge.stop()
 
     events = stub_events(stub.endpoint)
     after_restart = events[received_before:]

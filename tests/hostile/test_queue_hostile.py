@@ -16,11 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.config import load_settings
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime import options, wiring
-from phytrace_edge.runtime.health import report, thresholds
 from tests.processes import BridgeProcess, python_env, run_cli, wait_for
 
 ROOT = pytest.mark.skipif(os.geteuid() != 0, reason="needs root (mknod, mount); CI runs as root")
@@ -69,27 +66,16 @@ def lock_with_events_waiting(queue: Path) -> subprocess.Popen[str]:
 
 
 def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
-    tmp_path: Path, stub
+    tmp_path: Path, stub, bridge_in_process
 ) -> None:
     """While another process holds the write lock the sender meets it on its next claim
     (it claims every FLUSH_INTERVAL_S), counts it, and the robot's events keep being
     built; once the lock is gone sending resumes and nothing is lost. (Whether `status`
     names the problem depends on whether a send succeeded since; the verdict itself is
     tested in tests/unit/test_health.py.)"""
-    settings = load_settings(
-        env={
-            "PHYCLOUD_ENDPOINT": stub.endpoint,
-            "QUEUE_PATH": str(tmp_path / "queue.db"),
-            "BRIDGE_INPUT": "sim",
-            "SAMPLE_RATE_HZ": "20",
-            "FLUSH_INTERVAL_S": "0.2",
-            # the stop waits only until the queue is empty: room for a busy machine
-            "SHUTDOWN_GRACE_S": "60",
-        }
-    ).settings
-    built: list[str] = []
-    service = wiring.build_service(settings, {}, on_event=lambda e: built.append(e["event_id"]))
-    service.start()
+    # the stop waits only until the queue is empty: room for a busy machine
+    bridge = bridge_in_process(stub.endpoint, SAMPLE_RATE_HZ="20", SHUTDOWN_GRACE_S="60")
+    service, built = bridge.service, bridge.built
     holder = None
     try:
         wait_for(lambda: service.sender.stats.events_sent > 10, 30, "the first sends")
@@ -101,26 +87,19 @@ def test_another_process_holding_the_write_lock_pauses_sending_not_the_bridge(
         holder.communicate("release\n", timeout=30)
         sent = service.sender.stats.events_sent
         wait_for(lambda: service.sender.stats.events_sent > sent + 20, 30, "sending to resume")
-
-        def status_now() -> dict:
-            service.heartbeat.write(running=True)
-            now = time.time()
-            stats = read_stats(options.queue_path(settings), now)
-            return report(stats, thresholds(settings), now)
-
         # sending works again, so status soon says healthy (a stage that waited out the
         # lock may show its wait for a heartbeat or two)
         after = wait_for(
-            lambda: (doc := status_now())["healthy"] and doc, 30, "status to be healthy again"
+            lambda: (doc := bridge.status())["healthy"] and doc, 30, "status to be healthy again"
         )
         assert after["queue_errors"] == service.sender.stats.queue_errors > 0
     finally:
         if holder is not None and holder.poll() is None:
             holder.kill()
-        service.shutdown(settings.shutdown_grace_s)
+    bridge.stop()
     assert service.supervisor.restarts["sender"] == 0  # paused, never crashed
     assert service.store_depth_at_stop == 0
-    assert set(stub.event_ids()) == set(built)
+    assert set(stub.event_ids()) == bridge.built_ids()
 
 
 CLAIM_AND_WAIT = """
