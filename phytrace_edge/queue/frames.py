@@ -27,7 +27,7 @@ import orjson
 from phytrace_edge.queue import leases
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.records import QueuedEvent
-from phytrace_edge.queue.rows import StoredRow
+from phytrace_edge.queue.rows import FRAMED_COLUMNS, FramedRow, StoredRow
 
 FRAME_EVENTS = 100
 SEAL_AFTER_S = 10.0
@@ -119,16 +119,16 @@ class Sealer:
                     run = []
 
     def _pack(self, cursor: sqlite3.Cursor, ids: list[int]) -> None:
-        rows = cursor.execute(
-            "SELECT queued_at, event_id, codec, dict_id, json_size, body FROM events "
-            "WHERE id BETWEEN ? AND ? ORDER BY id",
-            (ids[0], ids[-1]),
-        ).fetchall()
-        events = [
-            self._codecs.decode(codec, dict_id, body) for _, _, codec, dict_id, _, body in rows
+        rows = [
+            FramedRow._make(row)
+            for row in cursor.execute(
+                f"SELECT {FRAMED_COLUMNS} FROM events WHERE id BETWEEN ? AND ? ORDER BY id",
+                (ids[0], ids[-1]),
+            )
         ]
+        events = [self._codecs.decode(row.codec, row.dict_id, row.body) for row in rows]
         encoded = self._codecs.encode(b"\n".join(events))
-        freed = sum(len(row[5]) for row in rows) - len(encoded.body)
+        freed = sum(len(row.body) for row in rows) - len(encoded.body)
         cursor.execute("DELETE FROM events WHERE id BETWEEN ? AND ?", (ids[0], ids[-1]))
         cursor.execute(
             "INSERT INTO events(id, last_id, count, queued_at, newest_at, event_id, codec, "
@@ -137,9 +137,9 @@ class Sealer:
                 ids[0],
                 ids[-1],
                 len(rows),
-                rows[0][0],
-                rows[-1][0],
-                rows[0][1],
+                rows[0].queued_at,
+                rows[-1].queued_at,  # newest_at: the frame expires with its newest event
+                rows[0].event_id,
                 encoded.codec,
                 encoded.dict_id,
                 sum(len(event) for event in events),

@@ -22,9 +22,10 @@ def expire(db: Database, cutoff: float, now: float) -> int:
         ages = "id, last_id, coalesce(newest_at, queued_at)"
         for chunk in leases.unleased(cursor, now, ages, EXPIRE_CHUNK):
             rows = chunk.rows
-            fresh_at = next((i for i, row in enumerate(rows) if row[2] >= cutoff), len(rows))
+            fresh_at = next((i for i, (_, _, age) in enumerate(rows) if age >= cutoff), len(rows))
             if fresh_at:
-                expired += delete_range(cursor, chunk.low, rows[fresh_at - 1][1])
+                _, last_expired, _ = rows[fresh_at - 1]
+                expired += delete_range(cursor, chunk.low, last_expired)
             if fresh_at < len(rows):
                 break  # ids grow with time: the first fresh row ends the expired prefix
         bump_counters(cursor, **{"drop:ttl": expired})

@@ -47,8 +47,37 @@ class StoredRow(NamedTuple):
     body: bytes
 
 
+class ThinnedRow(NamedTuple):
+    """A row as thinning reads it: whether it may be halved, and its events."""
+
+    id: int
+    last_id: int
+    events: int  # the column ``count``
+    important: int
+    thin_level: int
+    queued_at: float
+    newest_at: float | None  # a frame's newest event (its TTL clock); None: one event
+    codec: int
+    dict_id: int | None
+    body: bytes
+
+
+class FramedRow(NamedTuple):
+    """A single-event row as sealing reads it, to pack it into a frame."""
+
+    queued_at: float
+    event_id: str
+    codec: int
+    dict_id: int | None
+    body: bytes
+
+
 STORED_COLUMNS = "id, last_id, count, queued_at, event_id, codec, dict_id, body"
 SIZE_COLUMNS = "id, last_id, count, json_size, queued_at"
+THINNED_COLUMNS = (
+    "id, last_id, count, important, thin_level, queued_at, newest_at, codec, dict_id, body"
+)
+FRAMED_COLUMNS = "queued_at, event_id, codec, dict_id, body"
 
 
 def insert_rows(cursor: sqlite3.Cursor, rows: Sequence[NewRow], **counters: int) -> None:

@@ -29,6 +29,7 @@ from phytrace_edge.queue import leases
 from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import bump_counters
 from phytrace_edge.queue.frames import SEAL_AFTER_S, event_id_of, split_frame
+from phytrace_edge.queue.rows import THINNED_COLUMNS, ThinnedRow
 
 MAX_THIN_LEVEL = 6  # 1 in 64
 STEP_ROWS = 256
@@ -62,44 +63,45 @@ def thin_oldest(
     removed, walks, halved_in_walk = 0, 0, False
     kept: _Kept | None = None
     while removed < wanted and walks < MAX_WALKS:
-        rows = cursor.execute(
-            "SELECT id, last_id, count, important, thin_level, queued_at, newest_at, codec, "
-            "dict_id, body FROM events WHERE id >= ? ORDER BY id LIMIT ?",
-            (next_id, STEP_ROWS),
-        ).fetchall()
+        rows = [
+            ThinnedRow._make(row)
+            for row in cursor.execute(
+                f"SELECT {THINNED_COLUMNS} FROM events WHERE id >= ? ORDER BY id LIMIT ?",
+                (next_id, STEP_ROWS),
+            )
+        ]
         at_live_end = len(rows) < STEP_ROWS
         for row in rows:
-            row_id, last_id, count, important, thin_level, queued_at = row[:6]
-            if queued_at >= now - SEAL_AFTER_S:
+            if row.queued_at >= now - SEAL_AFTER_S:
                 at_live_end = True
                 break
-            next_id = last_id + 1
-            where = _free_range_of(free, row_id, last_id)
-            if important or thin_level > level or where is None:
+            next_id = row.last_id + 1
+            where = _free_range_of(free, row.id, row.last_id)
+            if row.important or row.thin_level > level or where is None:
                 _write(cursor, codecs, kept)  # a stretch ends here
                 kept = None
                 continue
-            events = split_frame(codecs.decode(row[7], row[8], row[9]), count)
+            events = split_frame(codecs.decode(row.codec, row.dict_id, row.body), row.events)
             # a frame keeps every other event, always its newest (so its newest_at, the
             # TTL's clock, stays exact); a single row, every other id of its level
-            if count > 1:
-                halved = events[(count - 1) % 2 :: 2]
+            if row.events > 1:
+                halved = events[(row.events - 1) % 2 :: 2]
             else:
-                halved = events[: 1 - (row_id >> thin_level) % 2]
+                halved = events[: 1 - (row.id >> row.thin_level) % 2]
             if (
                 kept is None
-                or (kept.level, kept.free_range) != (thin_level, where)
+                or (kept.level, kept.free_range) != (row.thin_level, where)
                 or len(kept.events) + len(halved) > frame_events
             ):
                 _write(cursor, codecs, kept)
-                kept = _Kept(thin_level, where, row_id)
-            kept.last_id = last_id
+                kept = _Kept(row.thin_level, where, row.id)
+            kept.last_id = row.last_id
             if halved:
-                kept.queued_at = queued_at if kept.queued_at is None else kept.queued_at
-                kept.newest_at = row[6] or queued_at
+                kept.queued_at = row.queued_at if kept.queued_at is None else kept.queued_at
+                kept.newest_at = row.newest_at or row.queued_at
             kept.events += halved
-            kept.old_bytes += len(row[9])
-            removed += count - len(halved)
+            kept.old_bytes += len(row.body)
+            removed += row.events - len(halved)
             halved_in_walk = True
             if removed >= wanted:
                 break

@@ -12,7 +12,7 @@ import orjson
 import pytest
 
 from phytrace_edge.cli.status import render_status
-from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows
+from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows, split_frame
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import QueuedEvent
 from phytrace_edge.runtime.health import Thresholds, report
@@ -76,6 +76,25 @@ def test_a_full_queue_thins_the_oldest_history_and_keeps_every_important_event(
     second_half = [s for s in periodic if s >= put // 2]
     assert len(first_half) < len(second_half), "the oldest history is the thinnest"
     assert max(b - a for a, b in itertools.pairwise(periodic)) <= 2**6 * 2 + 97
+
+
+def test_a_thinned_frame_keeps_the_time_of_its_newest_event(open_store, clock) -> None:
+    """A frame expires with its newest event (``newest_at``, the TTL's clock): after
+    thinning at several levels each frame's ``newest_at`` is still exactly when its
+    newest event was queued (two events a second here, event 0 the first)."""
+    store = open_store(limits=CAP, frame_events=20)
+    outage(store, clock, hours=0.75, rate_hz=2, important_every=10**9)
+    [(start,)] = store._db.read("SELECT queued_at FROM events WHERE important = 1")
+    frames = store._db.read(
+        "SELECT count, queued_at, newest_at, codec, dict_id, body, thin_level FROM events "
+        "WHERE count > 1"
+    )
+    assert {level for *_, level in frames} > {0}, "frames were thinned, some more than once"
+    for count, queued_at, newest_at, codec, dict_id, body, _ in frames:
+        events = split_frame(store.codecs.decode(codec, dict_id, body), count)
+        first, last = (orjson.loads(events[i])["seq"] for i in (0, -1))
+        assert newest_at == start + last // 2
+        assert queued_at <= start + first // 2, "never younger than its first event"
 
 
 def test_status_reports_the_resolution_left_by_age(open_store, clock) -> None:
