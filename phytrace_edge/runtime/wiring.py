@@ -32,7 +32,7 @@ from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
-from phytrace_edge.host_memory import give_back_free_memory
+from phytrace_edge.host_memory import give_back_free_memory, limit_malloc_arenas
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Source
 from phytrace_edge.ingest.sources.registry import create_source
@@ -139,6 +139,7 @@ def build_service(
 ) -> BridgeService:
     """Every part of the bridge, wired; ``transport`` replaces HTTP in tests and
     ``on_event`` sees every event built."""
+    limit_malloc_arenas(env)  # before the first of the service's threads allocates
     path = options.queue_path(s)
     warn_if_not_on_a_volume(path, env)
     source = create_source(options.source_options(s, env, ros_args))
