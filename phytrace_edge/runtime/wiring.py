@@ -103,16 +103,18 @@ class Shipping:
 
 
 @contextmanager
-def shipping(s: Settings) -> Iterator[Shipping]:
+def shipping(s: Settings, env: Mapping[str, str]) -> Iterator[Shipping]:
     """The robot's queue and its sender, as ``run`` would send it (``drain``)."""
+    limit_malloc_arenas(env)  # the sender's request threads, as in the service
     with open_queue(s) as store, _sending(s, store, options.send_policy(s)) as parts:
         yield parts
 
 
 @contextmanager
-def staging(s: Settings, path: Path) -> Iterator[Shipping]:
+def staging(s: Settings, path: Path, env: Mapping[str, str]) -> Iterator[Shipping]:
     """A staging queue at ``path`` and a sender that sends it strictly oldest first
     (``import``: the staging queue only feeds the sender)."""
+    limit_malloc_arenas(env)
     policy = dataclasses.replace(options.send_policy(s), live_share=0.0)
     with (
         QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store,
