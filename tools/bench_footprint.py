@@ -12,9 +12,7 @@ thread stacks, caches) and file-backed (shared libraries, mapped files), the pea
 - the floor: ``python -c`` sleeping, nothing imported;
 - ``run --input sim`` with PhyCloud down (nothing listens) and up
   (``tools/fast_receiver.py``);
-- ``drain`` of a large backlog, its peak against the empty-queue bridge's, and its rate;
-- the PhyCloud-up bridge and the drain again with glibc's default malloc arenas
-  (``MALLOC_ARENA_MAX=16``), against the two the bridge keeps;
+- ``drain`` of a large backlog, its peak against the empty-queue bridge's;
 - with ``--ros`` (rclpy importable): ``run --input ros`` against a bare rclpy node
   subscribed to the same topics with empty callbacks, a Cyclone DDS robot publishing
   (``tools/bench_ros_cpu.py``'s);
@@ -210,43 +208,28 @@ def main() -> None:
         print(f"| `{module}` | {cost:.1f} |")
 
 
-GLIBC_ARENAS = {"MALLOC_ARENA_MAX": "16"}  # glibc's own limit on 2 cores: the baseline
-
-
 def sim_rows(workdir: Path, args: argparse.Namespace, floor: Footprint) -> list[str]:
-    """``run --input sim`` with PhyCloud down and up, and ``drain`` of a backlog; the
-    last two also with glibc's default malloc arenas (the bridge limits them to two)."""
+    """``run --input sim`` with PhyCloud down and up, and ``drain`` of a backlog."""
     python = sys.executable
     sim = [python, "-m", "phytrace_edge", "run", "--input", "sim"]
     down = f"http://127.0.0.1:{free_port()}/api/v1"  # nothing listens
     empty = measured(sim, bridge_env(workdir / "down.db", down), args.seconds, WARM_UP_S)
     receiver = Receiver()
-    drains: dict[str, tuple[Footprint, float]] = {}
     try:
         env = bridge_env(workdir / "up.db", receiver.endpoint)
         up = measured(sim, env, args.seconds, WARM_UP_S)
-        env = bridge_env(workdir / "up-arenas.db", receiver.endpoint, **GLIBC_ARENAS)
-        up_arenas = measured(sim, env, args.seconds, WARM_UP_S)
-        for name, extra in (("two", {}), ("glibc", GLIBC_ARENAS)):
-            backlog = workdir / f"backlog-{name}.db"
-            fill(backlog, simulated_events(), args.drain_events)
-            env = bridge_env(backlog, receiver.endpoint, **extra)
-            started = time.monotonic()
-            drained = measured([python, "-m", "phytrace_edge", "drain"], env, 600, 0.5)
-            if waiting(backlog):
-                raise SystemExit(f"the drain stopped with {waiting(backlog)} events left")
-            drains[name] = drained, args.drain_events / (time.monotonic() - started)
+        backlog = workdir / "backlog.db"
+        fill(backlog, simulated_events(), args.drain_events)
+        env = bridge_env(backlog, receiver.endpoint)
+        drained = measured([python, "-m", "phytrace_edge", "drain"], env, 600, 0.5)
+        sent = args.drain_events - waiting(backlog)
     finally:
         receiver.stop()
-    (drained, rate), (drained_arenas, rate_arenas) = drains["two"], drains["glibc"]
     return [
         row("`run --input sim`, PhyCloud down", empty, floor),
         row("`run --input sim`, PhyCloud up", up, floor),
-        row("`run --input sim`, PhyCloud up, glibc's arenas (vs the row above)", up_arenas, up),
-        row(f"`drain` of {args.drain_events:,} events (vs the bridge, up)", drained, up),
-        row("`drain`, glibc's arenas (vs the row above)", drained_arenas, drained),
-        f"| (drained at {rate:,.0f} events/s; with glibc's arenas {rate_arenas:,.0f}, "
-        f"{rate / rate_arenas:.2f}×) | | | | | |",
+        row(f"`drain` of {args.drain_events:,} events (vs the row above)", drained, up),
+        f"| ({sent:,} of them sent while watched) | | | | | |",
     ]
 
 

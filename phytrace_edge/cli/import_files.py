@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 import time
@@ -44,7 +43,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     complete = True
     with (
         tempfile.TemporaryDirectory(prefix="import-", dir=state_dir) as staging,
-        wiring.staging(loaded.settings, Path(staging) / "queue.db", os.environ) as parts,
+        wiring.staging(loaded.settings, Path(staging) / "queue.db") as parts,
     ):
         stop_on_signals(parts.sender.stop)
         for file in args.files:

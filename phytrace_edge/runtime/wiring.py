@@ -32,7 +32,7 @@ from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
-from phytrace_edge.host_memory import give_back_free_memory, limit_malloc_arenas
+from phytrace_edge.host_memory import give_back_free_memory
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Source
 from phytrace_edge.ingest.sources.registry import create_source
@@ -103,18 +103,16 @@ class Shipping:
 
 
 @contextmanager
-def shipping(s: Settings, env: Mapping[str, str]) -> Iterator[Shipping]:
+def shipping(s: Settings) -> Iterator[Shipping]:
     """The robot's queue and its sender, as ``run`` would send it (``drain``)."""
-    limit_malloc_arenas(env)  # the sender's request threads, as in the service
     with open_queue(s) as store, _sending(s, store, options.send_policy(s)) as parts:
         yield parts
 
 
 @contextmanager
-def staging(s: Settings, path: Path, env: Mapping[str, str]) -> Iterator[Shipping]:
+def staging(s: Settings, path: Path) -> Iterator[Shipping]:
     """A staging queue at ``path`` and a sender that sends it strictly oldest first
     (``import``: the staging queue only feeds the sender)."""
-    limit_malloc_arenas(env)
     policy = dataclasses.replace(options.send_policy(s), live_share=0.0)
     with (
         QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store,
@@ -141,7 +139,6 @@ def build_service(
 ) -> BridgeService:
     """Every part of the bridge, wired; ``transport`` replaces HTTP in tests and
     ``on_event`` sees every event built."""
-    limit_malloc_arenas(env)  # before the first of the service's threads allocates
     path = options.queue_path(s)
     warn_if_not_on_a_volume(path, env)
     source = create_source(options.source_options(s, env, ros_args))
