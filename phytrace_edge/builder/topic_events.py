@@ -18,7 +18,8 @@ from typing import Any
 
 from phytrace_edge.builder.envelope import classify_stamp, envelope
 from phytrace_edge.ingest.convert import stamp_ns
-from phytrace_edge.ingest.generic import FieldTypes, message_data, message_type_name
+from phytrace_edge.ingest.generic import FieldTypes, Repairs, message_data, message_type_name
+from phytrace_edge.ingest.safe_text import TEXT_REPAIRED
 from phytrace_edge.ingest.topics import ExtraTopic
 
 EVENT_TYPE_TOPIC = "telemetry.topic"
@@ -71,12 +72,13 @@ class TopicEvents:
         return ready
 
     def stats(self) -> dict[str, dict[str, int]]:
-        """Per extra topic: events made, and due messages not sent because unchanged."""
+        """Per extra topic: events made, due messages not sent (unchanged, not
+        converted, dropped), and messages converted with their text repaired."""
         with self._lock:
             return {
                 topic: {
                     what: self.counts[(topic, what)]
-                    for what in ("events", "unchanged", "not_converted", "dropped")
+                    for what in ("events", "unchanged", "not_converted", "dropped", TEXT_REPAIRED)
                     if self.counts[(topic, what)] or what == "events"
                 }
                 for topic in self._specs
@@ -90,12 +92,15 @@ class TopicEvents:
         msg, received = self._latest.pop(topic)
         self._checked_at[topic] = now_mono_s
         spec = self._specs[topic]
+        repairs = Repairs()
         try:
-            data = message_data(msg, self._field_types, self._max_array)
-            type_name = spec.type_name or message_type_name(msg)
+            data = message_data(msg, self._field_types, self._max_array, repairs)
+            type_name = spec.type_name or repairs.text(message_type_name(msg))
         except Exception:  # a message the type information does not describe
             self.counts[(topic, "not_converted")] += 1
             return
+        if repairs.count:  # the message is kept, with U+FFFD where its text was broken
+            self.counts[(topic, TEXT_REPAIRED)] += 1
         if spec.mode == "on_change":
             last = self._last_data.get(topic)
             if last is not None and not changed(last, data, spec.deadband):

@@ -1,5 +1,5 @@
 """Conversions the handlers share: hostile-number filtering, precision, angles, stamps,
-text.
+text (cut to the schema's length and made safe for JSON: ``safe_text.py``).
 
 Every function here accepts what any of the message flavours carries (rclpy, rosbags,
 Cyclone DDS IDL samples, the mock): Python ints and floats, numpy scalars and arrays
@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
+from phytrace_edge.ingest.safe_text import TEXT_REPAIRED, safe_bytes, safe_str
 
 TEXT_MAX_CHARS = 256
 # Resolutions of derived values, as steps per unit (docs/udm.md).
@@ -133,14 +134,24 @@ def integer(value: Any) -> int | None:
 
 
 def text(value: Any) -> str | None:
-    """A string field, cut to the schema's 256 characters; None when not a string."""
+    """A string field, cut to the schema's 256 characters and safe for JSON; None when
+    not a string."""
+    return checked_text(value)[0]
+
+
+def checked_text(value: Any, limit: int = TEXT_MAX_CHARS) -> tuple[str | None, bool]:
+    """A string field cut to ``limit`` characters, with what UTF-8 cannot carry
+    replaced by U+FFFD (``safe_text``), and whether anything was; None when not a
+    string. ``bytes`` are read as UTF-8."""
     if type(value) is str:
-        return value[:TEXT_MAX_CHARS]
+        cut = value[:limit]
+        return (cut, False) if cut.isascii() else safe_str(cut)
     if isinstance(value, (bytes, bytearray)):
-        return bytes(value).decode("utf-8", "replace")[:TEXT_MAX_CHARS]
+        decoded, repaired = safe_bytes(value)
+        return decoded[:limit], repaired
     if not isinstance(value, str):
-        return None
-    return value[:TEXT_MAX_CHARS]
+        return None, False
+    return safe_str(str(value[:limit]))
 
 
 def degrees(radians: Any) -> float | None:
@@ -251,17 +262,30 @@ def present(**values: Any) -> dict[str, Any]:
 
 
 def header_fields(msg: Any) -> dict[str, Any]:
-    """``stamp_ns`` and ``frame_id`` of a message's ``std_msgs/Header``."""
+    """``stamp_ns`` and ``frame_id`` of a message's ``std_msgs/Header``, and
+    ``text_repaired`` when the frame id had to be made safe (``checked_text``)."""
     header = getattr(msg, "header", None)
     fields: dict[str, Any] = {}
     stamp = stamp_ns(header)
     if stamp is not None:
         fields["stamp_ns"] = stamp
     raw = getattr(header, "frame_id", None)
-    frame = raw[:TEXT_MAX_CHARS] if type(raw) is str else text(raw)
+    if type(raw) is str and raw.isascii():  # the common case, on every message
+        frame: str | None = raw[:TEXT_MAX_CHARS]
+    else:
+        frame, repaired = checked_text(raw)
+        if repaired:
+            fields[TEXT_REPAIRED] = 1
     if frame is not None:
         fields["frame_id"] = frame
     return fields
+
+
+def add_repairs(reading: dict[str, Any], count: int) -> None:
+    """Add ``count`` repaired strings to a reading's ``text_repaired`` (the dispatcher
+    counts the message once under that reason)."""
+    if count:
+        reading[TEXT_REPAIRED] = reading.get(TEXT_REPAIRED, 0) + count
 
 
 def pose_fields(pose: Any) -> dict[str, Any]:

@@ -1,9 +1,12 @@
 """The one place handlers are called: message in, reading to the builder, rejects counted.
 
 Every source (rclpy, DDS, bag replay, simulator) calls ``Dispatcher.on_message`` for
-each message. A message a handler rejects is counted by (topic, reason) and logged at
-WARNING at most once a minute per pair, so a topic that publishes garbage at 100 Hz
-cannot flood the log; it never stops the other topics.
+each message, and ``on_unreadable`` for one it could not decode (a bag's record whose
+text is not UTF-8). A message a handler rejects is counted by (topic, reason) and
+logged at WARNING at most once a minute per pair, so a topic that publishes garbage at
+100 Hz cannot flood the log; it never stops the other topics. A message whose text had
+to be repaired (``safe_text.py``) is kept, and counted and logged the same way under
+``text_repaired``.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from typing import Any
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest.readings import Reading
+from phytrace_edge.ingest.safe_text import TEXT_REPAIRED
 from phytrace_edge.ingest.topics import TOPICS
 
 log = logging.getLogger(__name__)
@@ -59,9 +63,25 @@ class Dispatcher:
             return
         for field in reading.pop("rejected_fields", ()):
             self._reject(topic, f"bad_field:{field}", f"field {field!r} has a wrong type")
+        repaired = reading.pop("text_repaired", 0)
+        if repaired:
+            self._reject(
+                topic,
+                TEXT_REPAIRED,
+                f"{repaired} string(s) held what UTF-8 cannot (a lone surrogate): "
+                "replaced by U+FFFD",
+                what="text repaired, message kept",
+            )
         self._on_reading(topic, reading)
 
-    def _reject(self, topic: str, reason: str, detail: str) -> None:
+    def on_unreadable(self, topic: str, reason: str, detail: str) -> None:
+        """A message of canonical ``topic`` the input could not decode: received, and
+        rejected for ``reason``; never raises."""
+        with self._lock:
+            self.received[topic] += 1
+        self._reject(topic, reason, detail)
+
+    def _reject(self, topic: str, reason: str, detail: str, what: str = "message rejected") -> None:
         now = time.monotonic()
         with self._lock:
             self.rejected[(topic, reason)] += 1
@@ -71,6 +91,4 @@ class Dispatcher:
             if should_log:
                 self._last_logged[(topic, reason)] = now
         if should_log:
-            log.warning(
-                "%s: message rejected (%s, %d so far): %.200s", topic, reason, count, detail
-            )
+            log.warning("%s: %s (%s, %d so far): %.200s", topic, what, reason, count, detail)

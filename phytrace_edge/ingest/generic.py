@@ -15,7 +15,9 @@ The rules (docs/udm.md, "telemetry.topic"):
 - ``uint8[]`` and ``byte[]`` (images, blobs) become base64 text, as rosbridge does.
 - An array (or a blob) longer than ``max_array`` becomes ``{"len": n, "head": [...]}``
   (a blob's head is base64 of its first ``max_array`` bytes).
-- Text is cut to ``TEXT_MAX_CHARS``.
+- Text is cut to ``TEXT_MAX_CHARS``, and what UTF-8 cannot carry (a lone surrogate)
+  becomes U+FFFD (``safe_text.py``); ``message_data`` counts the strings repaired in
+  the ``Repairs`` it is given.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from phytrace_edge.ingest.convert import f32
+from phytrace_edge.ingest.safe_text import safe_str
 
 TEXT_MAX_CHARS = 2048
 FieldTypes = Callable[[Any], Mapping[str, str]]  # message -> {field: rosidl type}
@@ -54,17 +57,36 @@ def message_type_name(msg: Any) -> str:
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 
-def message_data(msg: Any, field_types: FieldTypes, max_array: int) -> dict[str, Any]:
-    """``msg`` as a JSON-ready dict (see the module doc); never raises for odd values."""
+class Repairs:
+    """How many strings of the messages converted with it had to be repaired."""
+
+    __slots__ = ("count",)
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def text(self, value: str) -> str:
+        """``value`` cut to ``TEXT_MAX_CHARS`` and safe for JSON; a repair counted."""
+        text, repaired = safe_str(str(value[:TEXT_MAX_CHARS]))
+        self.count += repaired
+        return text
+
+
+def message_data(
+    msg: Any, field_types: FieldTypes, max_array: int, repairs: Repairs | None = None
+) -> dict[str, Any]:
+    """``msg`` as a JSON-ready dict (see the module doc); never raises for odd values.
+    Strings repaired on the way are counted in ``repairs``."""
+    tally = Repairs() if repairs is None else repairs
     data: dict[str, Any] = {}
     for name, kind in field_types(msg).items():
-        value = _value(getattr(msg, name, _MISSING), kind, field_types, max_array)
+        value = _value(getattr(msg, name, _MISSING), kind, field_types, max_array, tally)
         if value is not _MISSING:
             data[name] = value
     return data
 
 
-def _value(value: Any, kind: str, field_types: FieldTypes, max_array: int) -> Any:
+def _value(value: Any, kind: str, field_types: FieldTypes, max_array: int, repairs: Repairs) -> Any:
     """One field; ``_MISSING`` when it is left out (absent, NaN or inf)."""
     if value is _MISSING:
         return _MISSING
@@ -73,16 +95,20 @@ def _value(value: Any, kind: str, field_types: FieldTypes, max_array: int) -> An
         item_kind = array.group(1) or array.group(2)
         if item_kind in _BLOB_ITEMS:
             return _blob(value, max_array)
-        items = [_item(v, item_kind, field_types, max_array) for v in _head(value, max_array)]
+        items = [
+            _item(v, item_kind, field_types, max_array, repairs) for v in _head(value, max_array)
+        ]
         return _bounded(items, len(value), max_array)
     if _is_message(value):
-        return message_data(value, field_types, max_array)
+        return message_data(value, field_types, max_array, repairs)
+    if isinstance(value, str):
+        return repairs.text(value)
     return _scalar(value, kind)
 
 
-def _item(value: Any, kind: str, field_types: FieldTypes, max_array: int) -> Any:
+def _item(value: Any, kind: str, field_types: FieldTypes, max_array: int, repairs: Repairs) -> Any:
     """An array element: a number that is not finite is null, not left out."""
-    converted = _value(value, kind, field_types, max_array)
+    converted = _value(value, kind, field_types, max_array, repairs)
     return None if converted is _MISSING else converted
 
 
@@ -99,9 +125,7 @@ def _scalar(value: Any, kind: str) -> Any:
             return _MISSING if number is None else number
         number = float(value)
         return number if math.isfinite(number) else _MISSING
-    if isinstance(value, str):
-        return value[:TEXT_MAX_CHARS]
-    return _MISSING
+    return _MISSING  # text is read by ``_value``: its repairs are counted there
 
 
 def _is_message(value: Any) -> bool:

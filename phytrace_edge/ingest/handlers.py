@@ -24,6 +24,8 @@ from phytrace_edge.ingest.convert import (
     PERCENT,
     RAD,
     RAD_S,
+    add_repairs,
+    checked_text,
     degrees,
     f32,
     f32_all,
@@ -39,7 +41,6 @@ from phytrace_edge.ingest.convert import (
     sequence_items,
     single,
     snap,
-    text,
     wrap_degrees,
     xyz,
     xyz_deg,
@@ -323,14 +324,16 @@ def handle_joint_state(msg: Any) -> JointStateReading:
         ("effort", MM, list(sequence_items(msg, "effort", MAX_JOINTS))),
     )
     joints = []
+    repaired = 0
     for index, name in enumerate(names):
-        joint: dict[str, Any] = {"name": text(name) or f"joint_{index}"}
+        safe_name, name_repaired = checked_text(name)
+        repaired += name_repaired
+        joint: dict[str, Any] = {"name": safe_name or f"joint_{index}"}
         for key, digits, column in columns:
             value = rounded(column[index], digits) if index < len(column) else None
             if value is not None:
                 joint[key] = value
         joints.append(joint)
-    return cast(
-        JointStateReading,
-        present(**header_fields(msg), joints=joints or None),
-    )
+    reading = present(**header_fields(msg), joints=joints or None)
+    add_repairs(reading, repaired)
+    return cast(JointStateReading, reading)

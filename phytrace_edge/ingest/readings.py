@@ -16,10 +16,12 @@ from typing import Any, TypedDict
 
 
 class Checked(TypedDict, total=False):
-    """Fields a handler left out for a wrong type: the dispatcher counts and removes
-    them before the reading reaches the builder."""
+    """Fields a handler left out for a wrong type, and how many strings it had to
+    repair (``ingest/safe_text.py``): the dispatcher counts and removes both before
+    the reading reaches the builder."""
 
     rejected_fields: list[str]
+    text_repaired: int
 
 
 class Stamped(Checked, total=False):

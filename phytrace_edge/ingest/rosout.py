@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any, cast
 
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest.convert import integer, present, text
+from phytrace_edge.ingest.convert import checked_text, integer, present
 from phytrace_edge.ingest.readings import (
     LogReading,
 )
@@ -25,23 +25,32 @@ def handle_log(msg: Any) -> LogReading:
     """``rcl_interfaces/msg/Log`` -> ``{level, logger, message, file, function, line,
     stamp_ns}``; a record without a level or a logger name is malformed."""
     level = integer(getattr(msg, "level", None))
-    logger = text(getattr(msg, "name", None))
+    logger, logger_repaired = checked_text(getattr(msg, "name", None))
     if level is None or not logger:
         raise MalformedMessage("not_a_log_record", f"level={level!r} name={logger!r}")
-    message = getattr(msg, "msg", "")
+    raw_message = getattr(msg, "msg", "")
+    message, message_repaired = (
+        checked_text(raw_message, MESSAGE_MAX_CHARS)
+        if isinstance(raw_message, str)
+        else ("", False)
+    )
+    file, file_repaired = checked_text(getattr(msg, "file", None))
+    function, function_repaired = checked_text(getattr(msg, "function", None))
     stamp = getattr(msg, "stamp", None)
     seconds = integer(getattr(stamp, "sec", None)) or 0
     nanos = integer(getattr(stamp, "nanosec", None)) or 0
     line = integer(getattr(msg, "line", None))
+    repaired = logger_repaired + message_repaired + file_repaired + function_repaired
     return cast(
         LogReading,
         present(
             level=level_name(level),
             logger=logger,
-            message=message[:MESSAGE_MAX_CHARS] if isinstance(message, str) else "",
-            file=text(getattr(msg, "file", None)) or None,
-            function=text(getattr(msg, "function", None)) or None,
+            message=message,
+            file=file or None,
+            function=function or None,
             line=line if line else None,
             stamp_ns=seconds * 1_000_000_000 + nanos or None,
+            text_repaired=repaired or None,
         ),
     )

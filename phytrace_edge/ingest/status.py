@@ -4,16 +4,28 @@ status): ROS message -> reading, pure functions like those of ``handlers.py``.""
 from __future__ import annotations
 
 import json
+import re
 from typing import Any, cast
 
 from phytrace_edge.errors import MalformedMessage
-from phytrace_edge.ingest.convert import header_fields, integer, present, sequence_items, text
+from phytrace_edge.ingest.convert import (
+    add_repairs,
+    checked_text,
+    header_fields,
+    integer,
+    present,
+    sequence_items,
+)
 from phytrace_edge.ingest.readings import (
     DeliveryStatusReading,
     DiagnosticsReading,
 )
+from phytrace_edge.ingest.safe_text import safe_bytes, safe_json, safe_str
 
 DELIVERY_STATUS_MAX_BYTES = 64 * 1024
+# a JSON escape of a surrogate (\ud800-\udfff): the text's own characters are repaired
+# before parsing, so only these can put a lone surrogate into the parsed document
+_SURROGATE_ESCAPE = re.compile(r"\\u[dD][89a-fA-F]")
 # diagnostic_msgs/DiagnosticStatus.OK/WARN/ERROR/STALE
 DIAGNOSTIC_LEVELS = {0: "ok", 1: "warn", 2: "error", 3: "stale"}
 
@@ -30,18 +42,24 @@ def handle_diagnostic_array(msg: Any) -> DiagnosticsReading:
     unknown level value becomes ``unknown`` rather than being dropped.
     """
     statuses = []
+    repaired = 0
     for status in sequence_items(msg, "status", 1024):
         level = integer(getattr(status, "level", None))
-        name = text(getattr(status, "name", None)) or "(unnamed)"
+        name, name_repaired = checked_text(getattr(status, "name", None))
+        message, message_repaired = checked_text(getattr(status, "message", None))
+        hardware_id, hardware_repaired = checked_text(getattr(status, "hardware_id", None))
+        repaired += name_repaired + message_repaired + hardware_repaired
         statuses.append(
             present(
-                name=name,
+                name=name or "(unnamed)",
                 level=DIAGNOSTIC_LEVELS.get(level, "unknown") if level is not None else "unknown",
-                message=text(getattr(status, "message", None)) or None,
-                hardware_id=text(getattr(status, "hardware_id", None)) or None,
+                message=message or None,
+                hardware_id=hardware_id or None,
             )
         )
-    return cast(DiagnosticsReading, present(**header_fields(msg), statuses=statuses))
+    reading = present(**header_fields(msg), statuses=statuses)
+    add_repairs(reading, repaired)
+    return cast(DiagnosticsReading, reading)
 
 
 # /delivery/status JSON key -> (reading section, field)
@@ -63,18 +81,25 @@ def handle_delivery_status(msg: Any) -> DeliveryStatusReading:
     Raises ``MalformedMessage`` when the text is not a JSON object or is over 64 KiB.
     A field of the wrong type (or over 256 characters) is left out and listed in
     ``rejected_fields`` so the dispatcher can count it; the other fields still count.
+    Text UTF-8 cannot carry (a lone surrogate, raw or escaped as ``"\\ud800"``, in a
+    value or a key) is replaced by U+FFFD and counted in ``text_repaired``.
     """
     raw = getattr(msg, "data", None)
     if not isinstance(raw, (str, bytes)):
         raise MalformedMessage("not_text", f"data is {type(raw).__name__}, not a string")
     if len(raw) > DELIVERY_STATUS_MAX_BYTES:
         raise MalformedMessage("too_large", f"{len(raw)} bytes > {DELIVERY_STATUS_MAX_BYTES}")
+    source, source_repaired = safe_bytes(raw) if isinstance(raw, bytes) else safe_str(raw)
     try:  # the standard library's parser: this module is on the start-up path of `config`
-        document = json.loads(raw, parse_constant=_no_constants)
+        document = json.loads(source, parse_constant=_no_constants)
     except (ValueError, RecursionError) as exc:
         raise MalformedMessage("bad_json", str(exc)[:120]) from None
     if not isinstance(document, dict):
         raise MalformedMessage("not_object", f"JSON {type(document).__name__}, not an object")
+    repaired = int(source_repaired)
+    if _SURROGATE_ESCAPE.search(source):  # what can still give a lone surrogate
+        document, escaped = safe_json(document)
+        repaired += escaped
 
     sections: dict[str, dict[str, str]] = {"payload": {}, "task": {}, "operational": {}}
     rejected = []
@@ -98,6 +123,7 @@ def handle_delivery_status(msg: Any) -> DeliveryStatusReading:
             payload=payload or None,
             state=sections["operational"].get("state"),
             rejected_fields=rejected or None,
+            text_repaired=repaired or None,
         ),
     )
 

@@ -37,7 +37,12 @@ class Pipeline:
     def open(self) -> None:
         """Open the input: subscriptions, a bag, the simulated robot."""
         self.source.start(
-            Feed(self.dispatcher.on_message, self.sampler.tick, self.sampler.period_s)
+            Feed(
+                self.dispatcher.on_message,
+                self.sampler.tick,
+                self.sampler.period_s,
+                self.dispatcher.on_unreadable,
+            )
         )
 
     def ingest(self, stop: threading.Event, beat: Beat) -> None:

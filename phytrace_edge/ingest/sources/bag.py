@@ -6,6 +6,11 @@ Jazzy message definitions (the only module that imports it; it is the ``bag`` ex
 Messages go through the same handlers in bag time order, and events are built on the
 bag's timeline: ``captured_at`` is bag time, and staleness is measured in bag time.
 ``rate`` 1.0 replays at recorded speed, 2.0 twice as fast, 0 as fast as possible.
+
+A record that cannot be decoded (a string that is not UTF-8, which rosbags refuses
+with ``UnicodeDecodeError``) is skipped and counted as its topic's reject
+``undecodable``; the replay goes on. Only an unreadable bag (truncated, damaged)
+stops it early.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ log = logging.getLogger(__name__)
 
 NS = 1_000_000_000
 GAP_S = 30.0  # a pause in the bag longer than this is skipped, not ticked through
+UNDECODABLE = "undecodable"  # the reject reason of a record rosbags cannot decode
 
 
 class BagClock:
@@ -48,6 +54,7 @@ class ReplaySummary:
     path: str
     messages: Counter[str] = field(default_factory=Counter)
     skipped: Counter[str] = field(default_factory=Counter)
+    undecodable: Counter[str] = field(default_factory=Counter)  # by topic, in ``messages``
     events: int = 0
     gaps: int = 0
     longest_gap_s: float = 0.0
@@ -61,6 +68,11 @@ class ReplaySummary:
             f"replayed {self.path}: {sum(self.messages.values())} messages ({read}); "
             f"{self.events} events built; skipped: {skipped}"
         )
+        if self.undecodable:
+            by_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.undecodable.items()))
+            text += (
+                f"; {sum(self.undecodable.values())} undecodable message(s) skipped ({by_topic})"
+            )
         if self.gaps:
             text += f"; {self.gaps} gap(s) skipped, the longest {self.longest_gap_s:.0f} s"
         if self.stopped:
@@ -101,8 +113,9 @@ def replay(
     beat: Callable[[], None] = lambda: None,
 ) -> ReplaySummary:
     """Feed the bag's messages to ``feed.on_message`` and call ``feed.tick(bag_time_s)``
-    every sample period of bag time; stops at the end of the bag, at ``stop``, or at
-    the first unreadable record (reported in the summary, never raised). ``extras``
+    every sample period of bag time; stops at the end of the bag, at ``stop``, or where
+    the bag cannot be read on (reported in the summary, never raised). A record that
+    cannot be decoded is skipped and given to ``feed.on_unreadable``. ``extras``
     (TOPICS_EXTRA: name -> (actual, type or "")) are read with the bag's own types."""
     summary = ReplaySummary(path)
     reader = open_reader(path)
@@ -159,7 +172,9 @@ def replay(
                 last_ns = max(last_ns, timestamp)
                 name = canonical[connection.topic]
                 summary.messages[name] += 1
-                feed.on_message(name, reader.deserialize(raw, connection.msgtype))
+                msg = _decoded(reader, raw, connection.msgtype, name, summary, feed)
+                if msg is not None:
+                    feed.on_message(name, msg)
                 beat()
             if first_ns is not None and not stop.is_set():
                 ticks_until(int(clock.now_s * NS))
@@ -175,6 +190,21 @@ def replay(
             summary.error,
         )
     return summary
+
+
+def _decoded(
+    reader: Any, raw: bytes, msgtype: str, topic: str, summary: ReplaySummary, feed: Feed
+) -> Any:
+    """One record as a message, or None when it cannot be decoded: one bad record
+    (a string that is not UTF-8) must not end the replay of all the others. The feed
+    counts it with the topic's rejects and logs it at most once a minute; the summary
+    says how many there were."""
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as exc:  # rosbags raises what its decoder met: UnicodeDecodeError, ...
+        summary.undecodable[topic] += 1
+        feed.on_unreadable(topic, UNDECODABLE, f"{type(exc).__name__}: {exc}")
+        return None
 
 
 def _reads(name: str, msgtype: str, extras: Mapping[str, tuple[str, str]]) -> bool:
@@ -216,7 +246,9 @@ class BagSource:
             stop,
             beat,
         )
-        log.info("%s", self.summary.describe())
+        # a warning when records were skipped: the log's summary of those counted above
+        level = logging.WARNING if self.summary.undecodable else logging.INFO
+        log.log(level, "%s", self.summary.describe())
 
     def field_types(self, msg: Any) -> Mapping[str, str]:
         return self._field_types(msg)

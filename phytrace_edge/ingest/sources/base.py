@@ -41,15 +41,22 @@ class SourceOptions:
     max_ticks: int | None = None  # the simulator only: stop after this many robot cycles
 
 
+def _ignore_unreadable(topic: str, reason: str, detail: str) -> None:
+    """A feed that does not count what its source could not decode."""
+
+
 @dataclass(frozen=True)
 class Feed:
     """Where a source delivers: each message, and (for sources that keep their own
     time) each sample tick with its ``captured_at`` (None = the wall clock); a tick
-    says whether it built an event (False: nothing fresh to report)."""
+    says whether it built an event (False: nothing fresh to report). A message the
+    source could not decode goes to ``on_unreadable`` (topic, reason, detail), to be
+    counted with the topic's rejects."""
 
     on_message: Callable[[str, Any], None]
     tick: Callable[[float | None], bool]
     sample_period_s: float
+    on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable
 
 
 class SourceClock(Protocol):

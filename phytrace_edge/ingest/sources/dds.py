@@ -19,17 +19,23 @@ every message counts (diagnostics, goals, delivery status) are delivered as they
 The topics of ``TOPICS_EXTRA`` are read like state topics, with types made from ROS 2
 Jazzy's message definitions (``dds_dynamic.py``); one whose type is not given or not
 known is skipped, with the reason in the log and in ``status``.
+
+A sample that cannot be decoded (a string that is not UTF-8: cyclonedds decodes
+strictly) costs only itself: samples are taken one at a time, and that one is counted
+as its topic's reject ``undecodable``, as the bag input counts such a record.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections import Counter
 from collections.abc import Callable, Mapping
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.dispatch import LOG_EVERY_S
 from phytrace_edge.ingest.generic import FieldTypes, rosbags_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
@@ -37,6 +43,7 @@ from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 log = logging.getLogger(__name__)
 
 READER_DEPTH = 100
+UNDECODABLE = "undecodable"  # the reject reason of a sample that cannot be decoded (as bag's)
 # Fast DDS announces XTypes type information that Cyclone DDS rejects ("invalid type
 # object"), and a reader whose writer's type cannot be resolved never matches: not one
 # sample. With eProsima's information ignored (1.15 is its DDS vendor id), type names
@@ -71,6 +78,52 @@ def dds_topic_name(ros_topic: str) -> str:
     return "rt" + ros_topic
 
 
+def _ignore_unreadable(topic: str, reason: str, detail: str) -> None:
+    """Readers whose owner does not count what could not be decoded."""
+
+
+# What cyclonedds-python 11.0.1 does with a sample it cannot decode (measured on real
+# Cyclone DDS: a std_msgs String whose CDR string holds 0xff 0xfe): ``take(N=k)``
+# first takes up to k serialised samples out of the reader's cache in C, then decodes
+# them in Python; a string that is not UTF-8 makes the decoding raise
+# ``UnicodeDecodeError`` out of ``take``, and the k samples it took are gone, the good
+# ones with the bad (a second ``take`` returns nothing). ``take(N=1)`` on the bad one
+# raises the same and removes it: the next ``take(N=1)`` returns the sample after it.
+# Only an error of the C take (``DDSException``) leaves the cache as it was.
+# Cyclone calls a listener as each sample arrives (2,000 samples of a burst from
+# another process: 2,000 calls, each finding one sample, even with a busy Python
+# thread), so a batch is rare there; but an exception out of a listener is only
+# printed by ctypes ("Exception ignored on calling ctypes callback function", with its
+# traceback), the sample never counted; and out of the tick's take it ended the
+# sampler thread, for each bad sample (its supervisor restarted it, logging an
+# ERROR), and the topics after it were not taken. Hence one at a time, never
+# raising: a failing take costs its one sample, counted ``undecodable``; the extra
+# take that finds the cache empty costs a call into C.
+def take_each(
+    reader: Any,
+    limit: int,
+    on_sample: Callable[[Any], None],
+    on_undecodable: Callable[[Exception], None],
+    dds_error: type[Exception],
+) -> None:
+    """Take up to ``limit`` samples from ``reader`` one at a time, until it has no
+    more: each to ``on_sample``, or, when it cannot be decoded, its exception to
+    ``on_undecodable``. A ``dds_error`` (the C take failed: nothing was taken)
+    propagates."""
+    for _ in range(limit):
+        try:
+            samples = reader.take(N=1)
+        except dds_error:
+            raise
+        except Exception as exc:  # raised while decoding: that sample is taken, and lost
+            on_undecodable(exc)
+            continue
+        if not samples:
+            return
+        for sample in samples:
+            on_sample(sample)
+
+
 class DdsReaders:
     """One best-effort reader per enabled topic; samples go to ``on_message`` on
     Cyclone's listener thread."""
@@ -83,9 +136,10 @@ class DdsReaders:
         localhost_only: bool,
         extras: Mapping[str, tuple[str, str]] | None = None,
         cyclonedds_uri: str = "",
+        on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable,
     ) -> None:
         try:
-            from cyclonedds.core import Listener, Policy, Qos
+            from cyclonedds.core import DDSException, Listener, Policy, Qos
             from cyclonedds.domain import Domain, DomainParticipant
             from cyclonedds.internal import InvalidSample
             from cyclonedds.sub import DataReader
@@ -100,6 +154,10 @@ class DdsReaders:
         self._domain = Domain(domain_id, domain_config(localhost_only, cyclonedds_uri))
         self.participant: Any = DomainParticipant(domain_id)
         self._on_message = on_message
+        self._on_unreadable = on_unreadable
+        self._dds_error = DDSException
+        self._failures_lock = threading.Lock()
+        self._failures_logged: dict[str, float] = {}
         self.readers: list[Any] = []
         self.latest_readers: list[tuple[str, Any]] = []
         self.skipped: dict[str, str] = {}
@@ -128,7 +186,7 @@ class DdsReaders:
             if spec.every_message:
 
                 def deliver(reader: Any, name: str = canonical) -> None:
-                    self._hand_over(name, reader.take(N=READER_DEPTH))
+                    self._take(name, reader, READER_DEPTH)
 
                 reader = DataReader(
                     self.participant,
@@ -166,17 +224,41 @@ class DdsReaders:
     def take_latest(self) -> None:
         """Hand over the newest sample of each state topic, if one came since last time."""
         for name, reader in self.latest_readers:
-            self._hand_over(name, reader.take(N=1))
+            self._take(name, reader, 1)
 
-    def _hand_over(self, name: str, samples: list[Any]) -> None:
-        """Samples with data to ``on_message``; those without (a writer that went away
-        disposed or unregistered its instance) are only counted: they are no message,
-        and a topic goes stale by its age, not by its publisher leaving."""
-        for sample in samples:
-            if isinstance(sample, self._invalid_sample):
-                self.without_data[name] += 1
-            else:
-                self._on_message(name, sample)
+    def _take(self, name: str, reader: Any, limit: int) -> None:
+        """Up to ``limit`` samples of topic ``name``, one at a time (``take_each``);
+        never raises: it runs on Cyclone's listener thread, where an exception is only
+        printed, and at the sample tick, which must go on for the other topics."""
+        try:
+            take_each(
+                reader,
+                limit,
+                lambda sample: self._hand_over(name, sample),
+                lambda exc: self._on_unreadable(name, UNDECODABLE, f"{type(exc).__name__}: {exc}"),
+                self._dds_error,
+            )
+        except Exception as exc:  # the C take failed (the reader is being deleted, ...)
+            self._take_failed(name, exc)
+
+    def _hand_over(self, name: str, sample: Any) -> None:
+        """A sample with data to ``on_message``; one without (a writer that went away
+        disposed or unregistered its instance) is only counted: it is no message, and
+        a topic goes stale by its age, not by its publisher leaving."""
+        if isinstance(sample, self._invalid_sample):
+            self.without_data[name] += 1
+        else:
+            self._on_message(name, sample)
+
+    def _take_failed(self, name: str, exc: Exception) -> None:
+        """Log a failed take at WARNING, at most once a minute per topic."""
+        now = time.monotonic()
+        with self._failures_lock:
+            last = self._failures_logged.get(name)
+            if last is not None and now - last < LOG_EVERY_S:
+                return
+            self._failures_logged[name] = now
+        log.warning("%s: taking samples from DDS failed: %s: %s", name, type(exc).__name__, exc)
 
     def close(self) -> None:
         self.readers.clear()
@@ -203,6 +285,7 @@ class DdsSource:
             self._options.dds_localhost_only,
             self._options.extra_topics,
             self._options.dds_cyclonedds_uri,
+            feed.on_unreadable,
         )
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
