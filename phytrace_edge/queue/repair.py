@@ -6,15 +6,24 @@ When the clock then steps, the queued events of this boot stamped before the ste
 ``captured_at`` moved by the step and ``wall_clock.corrected_by_s`` saying by how much.
 
 Which events were stamped before the step is decided from the event itself, not from
-when it was queued (the step is seen up to a heartbeat after it happened): an event
-stamped at queue time t reads ``t + offset`` on the clock of its time. It is repaired
-when ``captured_at - offset_before`` falls within its row's queue times up to the step,
-and ``captured_at - offset_after`` does not fall within them from the last look before
-the step on. An event neither or both explain keeps its mark, uncorrected: PhyCloud can
-tell that its time is doubtful. Rows being sent are repaired too: a sender that claimed
-them before the step gives them back before its next attempt and sends them again
-(``QueueStore.stepped_since``); only a request already on the wire at the step goes out
-as it was, marked. Rows of earlier boots were stamped on another boot's clock.
+when it was queued (the step is seen up to a heartbeat after it happened, and an event
+may wait in the writer's memory for any time before it is queued): an event stamped at
+queue time t reads ``t + offset`` on the clock of its time. It is repaired when
+``captured_at - offset_before`` falls between this boot's start and the step, and
+``captured_at - offset_after`` does not fall between the last look before the step and
+the last time its row was queued. An event neither or both explain keeps its mark,
+uncorrected: PhyCloud can tell that its time is doubtful. Rows being sent are repaired
+too: a sender that claimed them before the step gives them back before its next attempt
+and sends them again (``QueueStore.stepped_since``); only a request already on the wire
+at the step goes out as it was, marked. Rows of earlier boots were stamped on another
+boot's clock.
+
+Which rows are looked at is decided by the order of transactions, not by times: the
+rows in the queue when the step is recorded are the repair's (below); a row put after
+that, in a transaction of its own, is looked at in that transaction against every step
+this process has recorded (``ClockKeeper.repair_put``). So an event stamped before a
+step and still in flight when the repair started (the writer batches in memory) is
+repaired as it reaches the queue, and no sender ever sees it unrepaired.
 
 A day's backlog takes seconds to rewrite (10 s for 432,000 events here), so the repair
 goes a chunk of rows per transaction, half a second per look at the clocks, and the
@@ -28,6 +37,7 @@ from __future__ import annotations
 import logging
 import sqlite3
 import time
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import orjson
@@ -41,26 +51,30 @@ from phytrace_edge.udm.event import format_timestamp, parse_timestamp
 
 log = logging.getLogger(__name__)
 
-STAMP_LATENCY_S = 2.0  # from the builder's stamp to the put: a tick and a commit
+STAMP_MARGIN_S = 2.0  # around the step's looks and the boot's start: millisecond stamps
+READ_MARGIN_S = 0.5  # stamped before queued, give or take a look's two clock reads
 CHUNK_ROWS = 16  # a transaction: up to 16 frames of 100 events, some 40 ms
 REPAIR_BUDGET_S = 0.5  # of repairing per look at the clocks (the heartbeat's, every 2 s)
 REPAIR_KEY = "clock_repair"
 
 
-def stamped_before(captured_s: float, queued: tuple[float, float], step: Step) -> bool:
-    """Whether an event of a row queued between ``queued`` (first, last) was stamped
-    on the clock before ``step`` (see the module doc). Pure."""
-    first, last = queued[0] - STAMP_LATENCY_S, queued[1]
+def stamped_before(captured_s: float, stamped: tuple[float, float], step: Step) -> bool:
+    """Whether an event stamped within ``stamped`` (queue times: this boot's start,
+    and the last time its row was queued) was stamped on the clock before ``step``
+    (see the module doc). How long the event waited before it was queued does not
+    matter: an event stamped after the step always falls within the after clock's
+    window, so it is never taken for one stamped before. Pure."""
+    since, last = stamped
     before = captured_s - step.offset_before
     after = captured_s - step.offset_after
-    explained_before = first <= before <= min(last, step.at) + STAMP_LATENCY_S
-    explained_after = max(first, step.looked_at - STAMP_LATENCY_S) <= after <= last
+    explained_before = since - STAMP_MARGIN_S <= before <= min(last, step.at) + STAMP_MARGIN_S
+    explained_after = step.looked_at - STAMP_MARGIN_S <= after <= last + READ_MARGIN_S
     return explained_before and not explained_after
 
 
-def repaired(event: dict[str, Any], queued: tuple[float, float], step: Step) -> bool:
-    """Move a marked event's ``captured_at`` by the step if it was stamped before it;
-    whether it was changed."""
+def repaired(event: dict[str, Any], stamped: tuple[float, float], steps: Sequence[Step]) -> bool:
+    """Move a marked event's ``captured_at`` by each of ``steps`` (in the order they
+    were seen) it was stamped before; whether it was changed."""
     clock = event.get("wall_clock")
     if not isinstance(clock, dict) or clock.get("synchronized") is not False:
         return False
@@ -71,11 +85,15 @@ def repaired(event: dict[str, Any], queued: tuple[float, float], step: Step) -> 
         captured_s = parse_timestamp(captured)
     except ValueError:
         return False
-    if not stamped_before(captured_s, queued, step):
-        return False
-    event["captured_at"] = format_timestamp(captured_s + step.seconds)
-    clock["corrected_by_s"] = round(clock.get("corrected_by_s", 0.0) + step.seconds, 3)
-    return True
+    changed = False
+    for step in steps:  # once moved by one, the stamp reads as taken on the next clock
+        if stamped_before(captured_s, stamped, step):
+            captured_s += step.seconds
+            clock["corrected_by_s"] = round(clock.get("corrected_by_s", 0.0) + step.seconds, 3)
+            changed = True
+    if changed:
+        event["captured_at"] = format_timestamp(captured_s)
+    return changed
 
 
 Ids = tuple[int, int]  # a range of row ids, both ends included
@@ -96,7 +114,8 @@ class Repair(NamedTuple):
 class ClockKeeper:
     """Queue time for one store (``clock``), and its looks at the clocks: it records
     them, and after a step repairs what was stamped before it, the rows still to
-    repair leased to ``<owner>:repair``."""
+    repair leased to ``<owner>:repair``; the rows put after the step was recorded are
+    looked at as they are put (``repair_put``)."""
 
     def __init__(
         self, db: Database, clocks: SystemClocks, codecs: Codecs, owner: str, lease_s: float
@@ -105,6 +124,9 @@ class ClockKeeper:
         self._db, self._codecs = db, codecs
         self._owner, self._lease_s = f"{owner}:repair", lease_s
         self.repairing = True  # until a look finds no repair under way (a crash's)
+        # the steps this process recorded, in order; read and written under the queue's
+        # lock, in the transaction of the look that records a step or of the put
+        self._steps: list[Step] = []
 
     def due(self) -> bool:
         """Whether a claim must look first: a step not seen yet, or a repair under way."""
@@ -139,10 +161,29 @@ class ClockKeeper:
         self.repairing = repair is not None and bool(repair.ranges)
         return step.seconds if step else 0.0
 
+    def repair_put(self, cursor: sqlite3.Cursor, rows: int) -> int:
+        """In the transaction of a put, after its ``rows`` rows were inserted: repair
+        those of their events stamped before a step this process had recorded already.
+        Such an event was in flight (built, not yet queued: the writer batches in
+        memory) when that step's repair took the rows then in the queue, and would
+        otherwise never be repaired. Events put in another process were in flight in
+        that process, whose own look sees the step. The events changed."""
+        if not self._steps or rows <= 0:
+            return 0
+        next_id = cursor.execute("SELECT value FROM counters WHERE name = 'next_id'").fetchone()
+        found = cursor.execute(
+            "SELECT id, count, queued_at, coalesce(newest_at, queued_at), codec, dict_id, "
+            "body FROM events WHERE id >= ? ORDER BY id",
+            (int(next_id[0]) - rows,),
+        ).fetchall()
+        return _repair_rows(cursor, self._codecs, found, self._steps, self.queue_time.base)
+
     def _record(self, cursor: sqlite3.Cursor) -> tuple[Step | None, Repair | None]:
         step = self.queue_time.record(cursor)
         repair = pending_repair(cursor)
         if step is not None:
+            # from this transaction on, the rows put are looked at as they are put
+            self._steps.append(step)
             if repair is not None:  # a second step before the first's repair ended (rare)
                 _repair_ranges(cursor, self._codecs, repair, limit=None)
             repair = _start(cursor, self._codecs, step, self.queue_time.base, self._now())
@@ -225,7 +266,7 @@ def _repair_ranges(
             "ORDER BY id LIMIT ?",
             (first, last, repair.boot_start, repair.step.at, -1 if limit is None else limit),
         ).fetchall()
-        repaired += _repair_rows(cursor, codecs, rows, repair.step)
+        repaired += _repair_rows(cursor, codecs, rows, [repair.step], repair.boot_start)
         if limit is None or len(rows) < limit:
             ranges.pop(0)
         else:
@@ -234,13 +275,16 @@ def _repair_ranges(
     return repair._replace(ranges=ranges, repaired=repaired)
 
 
-def _repair_rows(cursor: sqlite3.Cursor, codecs: Codecs, rows: list[Any], step: Step) -> int:
-    """Rewrite the rows holding events stamped before ``step``; the events changed."""
+def _repair_rows(
+    cursor: sqlite3.Cursor, codecs: Codecs, rows: list[Any], steps: Sequence[Step], since: float
+) -> int:
+    """Rewrite the rows (of this boot, which started at queue time ``since``) holding
+    events stamped before one of ``steps``; the events changed."""
     changed_events = size_change = 0
-    for row_id, count, first, last, codec, dict_id, body in rows:
+    for row_id, count, _first, last, codec, dict_id, body in rows:
         jsons = split_frame(codecs.decode(codec, dict_id, body), count)
         events = [orjson.loads(json) for json in jsons]
-        fixed = [repaired(event, (first, last), step) for event in events]
+        fixed = [repaired(event, (since, last), steps) for event in events]
         if not any(fixed):
             continue
         changed_events += sum(fixed)

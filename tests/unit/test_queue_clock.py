@@ -25,7 +25,7 @@ from phytrace_edge.ship.export import export_backlog
 from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
-from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs
+from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs, stamped
 
 DAY = 86_400.0
 TTL = QueueLimits(max_bytes=64 * MIB, ttl_s=7 * DAY)
@@ -413,3 +413,105 @@ def test_a_second_step_during_a_repair_applies_both(tmp_path: Path) -> None:
     assert sorted(events) == list(range(10))
     assert list(corrections(events).values()) == [pytest.approx(NOW - Y2001 - 5.0)] * 10
     store.close()
+
+
+# An event in flight at a step (issue 31): built, stamped on the old clock, and still in
+# the writer's memory when the step is seen and the queue's rows are taken for repair.
+
+
+def moved_by(seconds: float) -> object:
+    return pytest.approx(seconds, abs=1e-3)
+
+
+def test_an_event_in_flight_when_the_repair_ran_is_repaired_as_it_is_queued(
+    tmp_path: Path,
+) -> None:
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    in_flight = [stamped(n, machine) for n in (10, 11)]  # handed to the writer
+    machine.run(0.2)
+    ntp_steps(machine)
+    assert store.record_clocks() == moved_by(NOW - Y2001)  # the queue's rows repaired
+    machine.run(5.0)  # the writer was slow (a disk stall)
+    store.put_many(in_flight)
+    put_stamped(store, machine, range(12, 14))  # stamped after the step, still unsynchronized
+    events = claimed(store)
+    assert corrections(events) == {
+        **{n: moved_by(NOW - Y2001) for n in range(12)},
+        12: 0.0,
+        13: 0.0,
+    }
+    assert all(e["captured_at"].startswith("2026-") for e in events.values())
+    store.close()
+
+
+def test_an_event_queued_long_after_its_stamp_and_before_the_step_is_repaired(
+    tmp_path: Path,
+) -> None:
+    """The rule does not assume that an event is queued within a second or two."""
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    late = stamped(10, machine)
+    machine.run(30.0)  # half a minute in the writer's memory
+    store.put(late)
+    ntp_steps(machine)
+    store.record_clocks()
+    assert corrections(claimed(store)) == {n: moved_by(NOW - Y2001) for n in range(11)}
+    store.close()
+
+
+def test_a_put_that_read_its_time_before_the_step_was_recorded_is_repaired(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The put reads its queue time; the heartbeat's look records the step and takes
+    the rows in the queue for repair; then the put commits. Its row is queued before
+    the step's time, but was not in the queue when the repair took its rows."""
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    in_flight = stamped(10, machine)
+    ntp_steps(machine)
+    refuses = store._full_disk.refuses  # after the put's time is read, before its commit
+    looked: list[float] = []
+
+    def the_heartbeat_looks_first(sizes: list[int]) -> bool:
+        if not looked:
+            looked.append(store.record_clocks())
+        return refuses(sizes)
+
+    monkeypatch.setattr(store._full_disk, "refuses", the_heartbeat_looks_first)
+    store.put(in_flight)
+    assert looked == [moved_by(NOW - Y2001)]
+    assert corrections(claimed(store)) == {n: moved_by(NOW - Y2001) for n in range(11)}
+    store.close()
+
+
+def test_an_event_in_flight_over_two_steps_is_moved_by_both(tmp_path: Path) -> None:
+    machine, store = ten_queued_in_2001(tmp_path / "q.db")
+    first = stamped(10, machine)  # on the 2001 clock
+    ntp_steps(machine)
+    store.record_clocks()
+    second = stamped(11, machine)  # on the stepped clock, still unsynchronized
+    ntp_steps(machine, -5.0)  # chrony's second step
+    assert store.record_clocks() == moved_by(-5.0)
+    store.put_many([first, second])
+    assert corrections(claimed(store)) == {
+        **{n: moved_by(NOW - Y2001 - 5.0) for n in range(11)},
+        11: moved_by(-5.0),
+    }
+    store.close()
+
+
+@pytest.mark.parametrize(
+    ("offset_after", "stamped_at", "queued_at", "expected"),
+    [
+        (5000.0, 50.0, 500.0, True),  # queued 450 s after its stamp
+        (5000.0, 5.0, 500.0, False),  # before this boot started (at 10)
+        (997.0, 101.0, 101.05, True),  # a step back by 3 s: stamped before it
+        # stamped after that step and queued at once: the old clock's reading (98.9)
+        # fits as well, so it is left
+        (997.0, 101.9, 101.9, False),
+    ],
+)
+def test_how_long_an_event_waited_before_it_was_queued_does_not_matter(
+    offset_after: float, stamped_at: float, queued_at: float, expected: bool
+) -> None:
+    step = Step(at=102.0, looked_at=100.5, offset_before=1000.0, offset_after=offset_after)
+    clock = step.offset_before if stamped_at < 101.5 else step.offset_after  # stepped at 101.5
+    assert stamped_before(stamped_at + clock, (10.0, queued_at), step) is expected
