@@ -1,22 +1,31 @@
 """What the queue does on a full volume: the rules that keep it able to drain.
 
+"Full" is judged by the volume's real free space (``statvfs``, via ``VolumeSpace``), not
+by whether the reserve file is there: a reserve someone removed on a roomy disk is made
+again at once, and nothing is refused or evicted for it. Queued events are evicted
+(``evict_oldest``, counted ``disk_full``) only after SQLite reported SQLITE_FULL or the
+volume really has no room; a write that failed for another reason (read-only, an I/O
+error, a moved file) never evicts anything. A volume that cannot be looked at (its
+folder moved, removed or unmounted) is "unknown": nothing is sealed, refused or evicted
+for it, and nothing raises.
+
 Making room for new events never touches the full-disk reserve (``reserve``): it is
 kept for what lets the queue drain (claims, acks), or new events would take it at once.
-Once it is gone, new events may only fill pages the file already has: were they to grow
-it, the next ack could find no room for its own pages, and the queue could neither
-drain nor take events until someone freed space.
+Once it is gone and the volume has no room, new events may only fill pages the file
+already has: were they to grow it, the next ack could find no room for its own pages,
+and the queue could neither drain nor take events until someone freed space.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import time
 from pathlib import Path
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.caps import ROW_OVERHEAD_BYTES, drop_oldest
+from phytrace_edge.queue.caps import LOOK_EVERY_S, ROW_OVERHEAD_BYTES, VolumeSpace, drop_oldest
 from phytrace_edge.queue.database import Database, bump_counters
+from phytrace_edge.queue.volume import wal_share
 
 log = logging.getLogger(__name__)
 
@@ -26,28 +35,61 @@ REPORT_EVERY_S = 60.0
 class FullDisk:
     """The full-disk rules of one queue, and its once-a-minute report of refused events."""
 
-    def __init__(self, db: Database, wal_reserve: int) -> None:
+    def __init__(self, db: Database, volume: VolumeSpace) -> None:
         self._db = db
-        self._wal_reserve = wal_reserve
+        self.volume = volume
         self._next_report = 0.0
         self._refused_since_report = 0
+        self._restore_after = 0.0  # monotonic: the reserve is not tried again before
 
     def refuses(self, sizes: list[int]) -> bool:
-        """New rows of these encoded sizes must not be written: the reserve is gone
-        and they would grow the file."""
+        """New rows of these encoded sizes must not be written: the volume is really
+        full (``statvfs``), the reserve is gone, and they would grow the file. A missing
+        reserve on a volume with room is made again instead."""
         reserve = self._db.reserve
         if reserve is None or reserve.held():
             return False
-        free_pages = self._db.read("PRAGMA freelist_count")[0][0]
         needed = 2 * (sum(sizes) + ROW_OVERHEAD_BYTES * len(sizes))
+        volume = self.volume.look()
+        if volume is None:
+            return False  # unknown (the folder is gone): SQLite says whether they fit
+        if volume.free >= 2 * reserve.size + needed:
+            self.restore_reserve()  # not a full disk: the reserve comes back now
+            return False
+        free_pages = self._db.read("PRAGMA freelist_count")[0][0]
         return bool(free_pages * self._db.page_size < needed)
 
-    def has_room_to_seal(self, path: Path) -> bool:
+    def restore_reserve(self) -> bool:
+        """Make the reserve again when it is missing and the volume has room for it
+        twice (tried at most once every LOOK_EVERY_S); True when it is held."""
+        reserve = self._db.reserve
+        if reserve is None or reserve.held():
+            return True
+        if time.monotonic() < self._restore_after:
+            return False
+        self._restore_after = time.monotonic() + LOOK_EVERY_S
+        lacked_room = reserve.lacked_room
+        if not reserve.restore():
+            return False
+        if lacked_room:
+            log.info("queue %s: the disk has room again; the reserve is back", self._db.path)
+        else:
+            log.warning(
+                "queue %s: its full-disk reserve %s was missing (removed?); made it again",
+                self._db.path,
+                reserve.path,
+            )
+        return True
+
+    def has_room_to_seal(self) -> bool:
         """A frame's pages are written before its rows' are freed, and a checkpoint may
         grow the file for them: on a nearly full volume that would eat the room acks
-        need, so sealing waits for twice the WAL's share to be free."""
-        free = os.statvfs(path.parent)
-        return free.f_bavail * free.f_frsize >= 2 * self._wal_reserve
+        need, so sealing waits for twice the WAL's share (of the effective cap) to be
+        free. Never on a volume that cannot be looked at."""
+        volume = self.volume.look()
+        if volume is None:
+            return False
+        return volume.free >= 2 * wal_share(self.volume.cap().files)
 
     def evict_oldest(self, count: int, now: float) -> bool:
         """Drop the ``count`` oldest events (not those being sent) as ``disk_full``, to

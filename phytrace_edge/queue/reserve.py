@@ -6,7 +6,11 @@ disk would leave the bridge unable to ack what PhyCloud accepted, drop the oldes
 events, or take a claim, and it would never recover by itself. The queue therefore
 keeps ``<queue>-reserve``, a few MiB it gives up the first time a write fails for lack
 of space; that lets deletes and claims go on, and the pages they free hold new events
-again. The reserve is made again once the disk has room for it twice over.
+again. The reserve is made again as soon as the disk has room for it twice over
+(``full_disk``: looked at on the put path, at most once a second, and by maintenance).
+
+Nothing here raises for a folder that is gone (moved, removed, unmounted): the reserve
+is then simply not held, and cannot be made.
 """
 
 from __future__ import annotations
@@ -17,25 +21,32 @@ import os
 from pathlib import Path
 
 from phytrace_edge.durable import sync_folder
+from phytrace_edge.queue.volume import (
+    MIN_RESERVE_BYTES,
+    RESERVE_SHARE_OF_VOLUME,
+    effective_cap,
+    look_at,
+    volume_room,
+)
 from phytrace_edge.units import format_bytes
 
 log = logging.getLogger(__name__)
 
 RESERVE_SUFFIX = "-reserve"
-MIN_RESERVE_BYTES = 256 * 1024
-SHARE_OF_VOLUME = 16  # a small volume keeps a reserve of 1/16 of its size
 
 
 class SpaceReserve:
     def __init__(self, queue_path: Path, size: int) -> None:
         self.path = Path(f"{queue_path}{RESERVE_SUFFIX}")
         self.size = size
+        # given up for a full disk, or not made for lack of room, and not made since
+        self.lacked_room = False
 
     @classmethod
     def sized_for(cls, queue_path: Path, at_most: int) -> SpaceReserve:
-        """A reserve of ``at_most`` bytes, less on a small volume."""
-        volume = os.statvfs(queue_path.parent)
-        share = volume.f_blocks * volume.f_frsize // SHARE_OF_VOLUME
+        """A reserve of ``at_most`` bytes, less on a small volume (1/16 of it)."""
+        volume = look_at(queue_path.parent)
+        share = at_most if volume is None else volume.size // RESERVE_SHARE_OF_VOLUME
         return cls(queue_path, max(MIN_RESERVE_BYTES, min(at_most, share)))
 
     def held(self) -> bool:
@@ -43,37 +54,49 @@ class SpaceReserve:
         was made can leave the file empty, which holds nothing."""
         try:
             return self.path.stat().st_size >= self.size
-        except FileNotFoundError:
+        except OSError:  # not there, or its folder is gone
             return False
 
     def restore(self) -> bool:
         """Make the reserve when it is missing or short and the disk has room for it
-        twice; it is synced, file and folder, so that a power cut keeps it."""
+        twice; it is synced, file and folder, so that a power cut keeps it. False when
+        it could not be made (no room, or the folder is gone)."""
         if self.held():
             return True
-        free = os.statvfs(self.path.parent)
-        if free.f_bavail * free.f_frsize < 2 * self.size:
+        volume = look_at(self.path.parent)
+        if volume is None:
             return False
-        self.path.unlink(missing_ok=True)  # a short one, left by a power cut
+        if volume.free < 2 * self.size:
+            self.lacked_room = True
+            return False
         try:
+            self.path.unlink(missing_ok=True)  # a short one, left by a power cut
             descriptor = os.open(self.path, os.O_CREAT | os.O_WRONLY | os.O_EXCL, 0o600)
         except FileExistsError:
             return True
+        except OSError:
+            return False
         try:
             os.posix_fallocate(descriptor, 0, self.size)  # real blocks, not a sparse file
             os.fsync(descriptor)
         except OSError:
             os.close(descriptor)
-            self.path.unlink()
+            with contextlib.suppress(OSError):
+                self.path.unlink()
             return False
         os.close(descriptor)
-        sync_folder(self.path.parent)
+        try:
+            sync_folder(self.path.parent)
+        except OSError:
+            return False
+        self.lacked_room = False
         return True
 
     def release(self) -> bool:
         """Give the reserve back to the filesystem; False when there was none."""
         with contextlib.suppress(FileNotFoundError):
             self.path.unlink()
+            self.lacked_room = True
             log.error(
                 "queue %s: the disk is full; released the queue's %s reserve so that it can "
                 "still delete and claim events - free space on the volume",
@@ -85,14 +108,19 @@ class SpaceReserve:
 
 
 def warn_if_volume_smaller_than(queue_path: Path, queue_bytes: int, max_bytes: int) -> None:
-    """Log a WARNING when the volume could not hold a queue of ``max_bytes``."""
-    free = os.statvfs(queue_path.parent)
-    available = free.f_bavail * free.f_frsize + queue_bytes
-    if available < max_bytes:
+    """Log a WARNING when the volume could not hold a queue of ``max_bytes``: the
+    volume is then the queue's cap (``volume``)."""
+    volume = look_at(queue_path.parent)
+    if volume is None:
+        return
+    room = volume_room(queue_bytes, volume, max_bytes)
+    if room < max_bytes:
         log.warning(
-            "queue %s: the volume has %s free for the queue but QUEUE_MAX_BYTES is %s; "
-            "the disk will fill before the cap - lower QUEUE_MAX_BYTES or free space",
+            "queue %s: the volume has room for %s of queue, less than QUEUE_MAX_BYTES "
+            "(%s): the volume is the cap (events may take %s), and QUEUE_ON_FULL applies "
+            "when it is reached - free space or lower QUEUE_MAX_BYTES",
             queue_path,
-            format_bytes(available),
+            format_bytes(room),
             format_bytes(max_bytes),
+            format_bytes(effective_cap(max_bytes, queue_bytes, volume).bytes),
         )

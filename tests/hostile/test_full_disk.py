@@ -1,10 +1,15 @@
 """A real full filesystem (a small tmpfs mounted for the test, so root only): the bridge
-keeps running while PhyCloud is down and the disk fills, counts every event it could not
-keep, survives a restart on the full disk, and drains by itself once PhyCloud is back —
-while the disk is still full, and after space returns."""
+keeps running while PhyCloud is down and something else fills the disk under it, counts
+every event it could not keep, survives a restart on the full disk, and drains by itself
+once PhyCloud is back — while the disk is still full, and after space returns.
+
+(The queue alone never fills its volume: its cap follows the volume's free space,
+tests/hostile/test_volume_space.py. Here another file takes every byte left while the
+bridge runs, so SQLite really reports SQLITE_FULL and the reserve is given up.)"""
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import subprocess
@@ -36,13 +41,19 @@ def volume(tmp_path: Path):
     subprocess.run(["umount", "-l", str(path)], check=False)
 
 
-def fill(volume: Path, leave_bytes: int) -> Path:
-    """A file that takes all but ``leave_bytes`` of the volume."""
-    stat = os.statvfs(volume)
-    free = stat.f_bavail * stat.f_frsize
+def fill(volume: Path) -> Path:
+    """A file that takes every byte left on the volume (written until ENOSPC: the
+    bridge writes to the same volume meanwhile)."""
     filler = volume / "filler"
-    with filler.open("wb") as out:
-        out.write(b"\0" * max(0, free - leave_bytes))
+    chunk = b"\0" * 65536
+    with filler.open("wb", buffering=0) as out:
+        while True:
+            try:
+                out.write(chunk)
+            except OSError as exc:
+                if exc.errno != errno.ENOSPC:
+                    raise
+                break
     return filler
 
 
@@ -65,9 +76,10 @@ def test_a_full_disk_is_survived_counted_and_drained_by_itself(
         "FLUSH_INTERVAL_S": "0.2",
         "BATCH_SIZE": "50",
     }
-    filler = fill(volume, leave_bytes=2 * 1024 * 1024)
     bridge = BridgeProcess(tmp_path / "bridge.log", **env).start()
     try:
+        wait_for(lambda: status(env).get("queue", {}).get("depth", 0) > 300, 60, "events")
+        filler = fill(volume)  # another program takes the rest of the disk
         full = wait_for(
             lambda: (doc := status(env)).get("drops", {}).get("disk_full") and doc,
             120,
@@ -96,6 +108,8 @@ def test_a_full_disk_is_survived_counted_and_drained_by_itself(
 
         # space returns: everything left goes, by itself
         filler.unlink()
+        reserve = volume / "queue.db-reserve"
+        wait_for(lambda: reserve.exists(), 10, "the reserve to be made again")
         wait_for(lambda: status(env)["queue"]["depth"] < 60, 120, "the backlog to drain")
         bridge.signal(signal.SIGTERM)
         assert bridge.wait(60) == 0
@@ -113,3 +127,6 @@ def test_a_full_disk_is_survived_counted_and_drained_by_itself(
     )
     assert final["queue"]["depth"] == 0
     assert delivered == final["sent_total"]
+    log = (tmp_path / "bridge.log").read_text()
+    assert "released the queue's" in log, "SQLite really ran out of space"
+    assert "the disk has room again; the reserve is back" in log
