@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -11,6 +14,21 @@ import pytest
 from tests.flavours import FLAVOURS
 
 HAVE_ROSBAGS = importlib.util.find_spec("rosbags") is not None
+
+
+@pytest.fixture(autouse=True, scope="session")
+def runtime_directory(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The bridges the tests start keep their live status (runtime/live_status.py) in
+    a folder of the test run, as systemd's RuntimeDirectory would give them, not in
+    the machine's /run; their processes inherit it."""
+    folder = tmp_path_factory.mktemp("run")
+    before = os.environ.get("RUNTIME_DIRECTORY")
+    os.environ["RUNTIME_DIRECTORY"] = str(folder)
+    yield folder
+    if before is None:
+        os.environ.pop("RUNTIME_DIRECTORY", None)
+    else:
+        os.environ["RUNTIME_DIRECTORY"] = before
 
 
 @pytest.fixture(params=FLAVOURS)

@@ -11,7 +11,7 @@ import time
 
 from phytrace_edge.cli.signals import on_signals
 from phytrace_edge.config import LoadedSettings
-from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, StageFailedError
+from phytrace_edge.errors import EXIT_OK, EXIT_UNHEALTHY, QueueError, StageFailedError
 from phytrace_edge.runtime.sd_notify import SystemdNotifier
 
 DUPLICATE_SIGNAL_S = 1.0  # a second signal sooner is the first one delivered twice
@@ -62,5 +62,11 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
                 f"{service.store_depth_at_stop} event(s) are still queued: "
                 "phytrace-edge drain sends them now"
             )
-        return EXIT_OK if finished.ok else EXIT_UNHEALTHY
+        return EXIT_OK if finished.ok and not service.lost_at_stop else EXIT_UNHEALTHY
+    if service.lost_at_stop:
+        raise QueueError(
+            f"{service.lost_at_stop} event(s) could not be written to the queue "
+            f"{loaded.settings.queue_path} before the stop (counted as dropped: "
+            "unwritable) - check the disk"
+        )
     return EXIT_OK

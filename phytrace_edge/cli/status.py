@@ -4,14 +4,16 @@ healthy, 1 unhealthy, 3 not running."""
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import os
+from typing import Any, cast
 
 from phytrace_edge.cli.common import error, print_json
 from phytrace_edge.config import LoadedSettings
-from phytrace_edge.errors import EXIT_NOT_RUNNING
-from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.runtime.documents import ClockSection, StatusReport
-from phytrace_edge.runtime.health import exit_code, report, thresholds
+from phytrace_edge.errors import EXIT_NOT_RUNNING, QueueError
+from phytrace_edge.queue.inspect import QueueStats, read_stats
+from phytrace_edge.runtime import live_status
+from phytrace_edge.runtime.documents import ClockSection, ServiceDocument, StatusReport
+from phytrace_edge.runtime.health import Live, Thresholds, exit_code, report, thresholds
 from phytrace_edge.units import format_bytes
 
 LOGS = False  # status prints, it does not log: the health check starts it every 30 s
@@ -27,17 +29,39 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     """Show the queue and the service; exit 0 healthy, 1 unhealthy, 3 not running."""
-    path = loaded.settings.queue_path  # loading fills in its default
-    stats = read_stats(str(path))
-    if stats is None:
+    path = str(loaded.settings.queue_path)  # loading fills in its default
+    live = live_status.read(path, os.environ)
+    try:
+        stats = read_stats(path)
+    except QueueError:
+        if live is None:
+            raise
+        stats = None  # the file cannot be read (a failing disk): the service can say more
+    if stats is None and live is None:
         error(f"no queue at {path}: the bridge never ran with this QUEUE_PATH")
         return EXIT_NOT_RUNNING
-    document = report(stats, thresholds(loaded.settings), stats.read_at)
+    document = report_with_live(path, stats, live, thresholds(loaded.settings))
     if args.json:
         print_json(document)
     elif not args.quiet:
         print(render_status(document))
     return exit_code(document)
+
+
+def report_with_live(
+    path: str, stats: QueueStats | None, live: dict[str, Any] | None, limits: Thresholds
+) -> StatusReport:
+    """The status document from the queue file and the service's live status file;
+    either may be missing (a deleted queue file, a service that never wrote one)."""
+    heard = None
+    if live is not None:
+        heard = Live(cast(ServiceDocument, live), live_status.boottime() - live.get("boottime", 0))
+    if stats is None:  # what the service last read of its queue
+        assert heard is not None
+        now = heard.document.get("heartbeat_at", 0.0) + heard.age_s
+        counters = dict(heard.document.get("queue_counters", {}))
+        stats = QueueStats(path, counters, None, None, 0, None, 0, read_at=now)
+    return report(stats, limits, stats.read_at, heard)
 
 
 def render_resolution(bands: list[dict[str, Any]]) -> str:
@@ -77,8 +101,9 @@ def render_status(d: StatusReport) -> str:
         )
     oldest = "" if queue["oldest_age_s"] is None else f", oldest {queue['oldest_age_s']:.1f} s"
     lines.append(
-        f"  queue        {queue['depth']} event(s), {format_bytes(queue['bytes'])} of "
-        f"{format_bytes(queue['cap_bytes'])} ({queue['fill']:.0%}){oldest}  {queue['path']}"
+        f"  queue        {queue['depth']:,} event(s), {format_bytes(queue['held_bytes'])} held "
+        f"of {format_bytes(queue['effective_cap_bytes'])} ({queue['cap_limited_by']} limit, "
+        f"{queue['fill']:.0%}; files {format_bytes(queue['bytes'])}){oldest}  {queue['path']}"
     )
     lines.append(
         f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
@@ -112,6 +137,23 @@ def render_status(d: StatusReport) -> str:
             f"  {topic:<16} {t['rate_hz']:.1f} Hz, {t['received']} received{seen}"
             + "".join(f", {note}" for note in topic_notes(t))
         )
+    storage = d["storage"]
+    if storage["backlog"] or storage["commit_max_s"]:
+        lines.append(
+            f"  disk         {storage['backlog']} event(s) waiting in memory, last commit "
+            f"{_seconds(storage['commit_s'])}, slowest {_seconds(storage['commit_max_s'])} "
+            "in the last minute"
+        )
+    a = d["accounting"]
+    lines.append(
+        f"  accounting   built {a['built']} = delivered {a['delivered']}"
+        + (f" + exported {a['exported']}" if a["exported"] else "")
+        + f" + queued {a['queued']} + dead-lettered {a['dead_lettered']}"
+        + f" + dropped {sum(a['dropped'].values())} + in memory {a['in_memory']}"
+        + ("" if a["balanced"] else "  (DOES NOT ADD UP)")
+        + (" (at the last heartbeat)" if d["running"] else "")
+    )
+    lines += [f"  warning: {warning}" for warning in d["warnings"]]
     lines += [f"  problem: {problem}" for problem in d["problems"]]
     return "\n".join(lines)
 
@@ -130,8 +172,14 @@ def render_clock(clock: ClockSection) -> str | None:
 def topic_notes(t: dict[str, Any]) -> list[str]:
     """What else is worth a glance about a topic: why it is silent or broken, and what
     became of an extra topic's or /rosout's messages."""
-    rejected = sum(t.get("rejected", {}).values())
+    reasons = t.get("rejected", {})
+    # a message with its text repaired was kept: not a reject (an extra topic counts
+    # it among its own figures)
+    repaired = reasons.get("text_repaired", 0) + t.get("text_repaired", 0)
+    rejected = sum(reasons.values()) - reasons.get("text_repaired", 0)
     notes = [f"{rejected} rejected"] if rejected else []
+    if repaired:
+        notes.append(f"{repaired} with text repaired")
     if t.get("publishers") == 0:
         notes.append("no publisher")
     if t.get("qos_incompatible"):
@@ -148,3 +196,7 @@ def topic_notes(t: dict[str, Any]) -> list[str]:
         if t.get(key):
             notes.append(f"{t[key]} {label}")
     return notes
+
+
+def _seconds(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f} s"

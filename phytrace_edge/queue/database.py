@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
-from phytrace_edge.queue.recovery import mark_damaged
+from phytrace_edge.queue.recovery import connect, mark_damaged
 from phytrace_edge.queue.reserve import SpaceReserve
 from phytrace_edge.queue.sqlite_errors import queue_error
 
@@ -33,6 +33,11 @@ def configure(connection: sqlite3.Connection, sync: str) -> None:
     """The queue's connection settings (QUEUE_SYNC is ``full`` or ``normal``)."""
     connection.execute(f"PRAGMA synchronous = {'FULL' if sync == 'full' else 'NORMAL'}")
     connection.execute("PRAGMA shrink_memory")  # what the check at open read
+    configure_memory(connection)
+
+
+def configure_memory(connection: sqlite3.Connection) -> None:
+    """Cache and delete settings, for every connection to the queue."""
     connection.execute(f"PRAGMA cache_size = -{CACHE_KIB}")
     # Some builds zero every freed page, so that an ack writes every page it frees (an
     # ack of 50 plain events: 239 KB of WAL, against 33 KB with FAST, which clears only
@@ -54,6 +59,8 @@ class Database:
         self.page_size = int(connection.execute("PRAGMA page_size").fetchone()[0])
         self.synchronous = int(connection.execute("PRAGMA synchronous").fetchone()[0])
         self._deferred: Counter[str] = Counter()
+        # its own lock: a count may be deferred while another thread holds ``lock``
+        self._deferred_lock = threading.Lock()
 
     def write(self, body: Callable[[sqlite3.Cursor], T], durable: bool = True) -> T:
         """Run ``body`` in a write transaction that must happen even on a full disk (a
@@ -103,12 +110,16 @@ class Database:
             return 0
 
     @contextlib.contextmanager
-    def transaction(self, durable: bool = True) -> Iterator[sqlite3.Cursor]:
+    def transaction(
+        self, durable: bool = True, after_commit: Callable[[], None] | None = None
+    ) -> Iterator[sqlite3.Cursor]:
         """A write transaction (BEGIN IMMEDIATE); SQLite errors become queue errors.
 
         ``durable=False`` commits at ``synchronous=NORMAL``: atomic, and safe against
         a crash of the process, but a power cut may lose it; the next durable commit's
-        fsync covers it too. For claims and acks, whose loss only means a resend."""
+        fsync covers it too. For claims and acks, whose loss only means a resend.
+        ``after_commit`` runs after the commit, still under the lock, so that a reader
+        holding the lock never sees the change without what the caller records of it."""
         with self.lock:
             cursor = self.connection.cursor()
             relaxed = not durable and self.synchronous > _NORMAL
@@ -117,11 +128,15 @@ class Database:
                     cursor.execute("PRAGMA synchronous = NORMAL")
                 cursor.execute("BEGIN IMMEDIATE")
                 yield cursor
-                deferred = dict(self._deferred)
+                with self._deferred_lock:
+                    deferred = dict(self._deferred)
                 bump_counters(cursor, **deferred)
                 cursor.execute("COMMIT")
-                self._deferred.subtract(deferred)
-                self._deferred = +self._deferred  # drop the zeros
+                with self._deferred_lock:
+                    self._deferred.subtract(deferred)
+                    self._deferred = +self._deferred  # drop the zeros
+                if after_commit is not None:
+                    after_commit()
             except BaseException as exc:
                 if self.connection.in_transaction:
                     self.connection.rollback()
@@ -155,14 +170,26 @@ class Database:
             mark_damaged(self.path, str(exc))
         return error
 
+    def reopen(self, replace_file: Callable[[], None]) -> None:
+        """Close the connection, let ``replace_file`` put another file at the path, and
+        connect to that (``file_watch``: a deleted queue file copied back)."""
+        with self.lock:
+            busy_timeout_ms = self.connection.execute("PRAGMA busy_timeout").fetchone()[0]
+            self.connection.close()
+            replace_file()
+            connection = connect(self.path, busy_timeout_ms / 1000)
+            connection.execute(f"PRAGMA synchronous = {self.synchronous}")
+            configure_memory(connection)
+            self.connection = connection
+
     def defer_counts(self, **deltas: int) -> None:
         """Counts to write with the next transaction that commits (the disk is full)."""
-        with self.lock:
+        with self._deferred_lock:
             self._deferred.update(deltas)
 
     def deferred_counts(self) -> dict[str, int]:
         """Counts not yet written, for ``stats`` to add to what the table says."""
-        with self.lock:
+        with self._deferred_lock:
             return dict(self._deferred)
 
     def counter(self, name: str) -> int:

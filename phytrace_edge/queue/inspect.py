@@ -19,6 +19,7 @@ from typing import Any, NamedTuple
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.clock import queue_time_now
 from phytrace_edge.queue.sqlite_errors import queue_error
+from phytrace_edge.queue.volume import Cap, Volume, effective_cap, look_at
 
 READ_TIMEOUT_S = 5.0
 DAMAGED_SUFFIX = ".damaged"  # written by ``recovery`` when a check finds damage
@@ -42,9 +43,9 @@ class ClockState(NamedTuple):
 
 
 class QueueStats(NamedTuple):
-    """The queue's counters and oldest/newest events, its files' size, and the service's
-    last heartbeat (None when no service ever ran on this queue). ``extra_drops`` are
-    drops counted in memory and not yet written (the disk was full).
+    """The queue's counters and oldest/newest events, its files' size and its volume's
+    room (``effective_cap``), and the service's last heartbeat (None when no service
+    ever ran on this queue).
 
     A NamedTuple, as the other records on ``status``'s path: ``dataclasses`` imports
     ``inspect``, 7 ms of a health check's 30 (docs/benchmarks.md, "Start-up")."""
@@ -58,17 +59,32 @@ class QueueStats(NamedTuple):
     leased: int
     service: ServiceState | None = None
     max_bytes: int = 0
-    extra_drops: dict[str, int] | None = None
     damaged: str | None = None
     resolution: tuple[dict[str, Any], ...] = ()
     clock: ClockState = ClockState(0.0, None, None, None)
     read_at: float = 0.0  # queue time
+    volume: Volume | None = None  # the queue's volume when read; None: its folder is gone
+
+    def effective_cap(self, max_bytes: int | None = None) -> Cap:
+        """The bytes the queue's events may take, and which limit set them:
+        QUEUE_MAX_BYTES (``max_bytes``, by default the store's), or what the volume
+        can give the queue when that is less (``volume.effective_cap``)."""
+        cap = self.max_bytes if max_bytes is None else max_bytes
+        return effective_cap(cap, self.file_bytes, self.volume)
+
+    @property
+    def held_bytes(self) -> int:
+        """Bytes of the events the queue holds (the ``stored_bytes`` counter): what a
+        drain frees, unlike the file's size, which shrinks only at a VACUUM."""
+        return self.stored_bytes
 
     def with_deferred(self, deferred: dict[str, int], max_bytes: int) -> "QueueStats":
-        """These stats as the store sees them: its cap, and the drops counted in memory
-        and not yet written (the disk was full)."""
-        drops = {name[5:]: n for name, n in deferred.items() if name.startswith("drop:")}
-        return self._replace(max_bytes=max_bytes, extra_drops=drops)
+        """These stats as the store sees them: its cap, and the counts kept in memory
+        and not yet written (the disk was full or failing) added to the counters."""
+        counters = dict(self.counters)
+        for name, count in deferred.items():
+            counters[name] = counters.get(name, 0) + count
+        return self._replace(max_bytes=max_bytes, counters=counters)
 
     @property
     def depth(self) -> int:
@@ -99,8 +115,6 @@ class QueueStats(NamedTuple):
     def drops(self) -> dict[str, int]:
         """Events that left the queue other than by delivery, by reason."""
         drops = {k[5:]: v for k, v in self.counters.items() if k.startswith("drop:") and v}
-        for reason, count in (self.extra_drops or {}).items():
-            drops[reason] = drops.get(reason, 0) + count
         return {reason: n for reason, n in drops.items() if n}
 
 
@@ -111,7 +125,7 @@ def file_bytes(path: str | os.PathLike[str]) -> int:
     for suffix in ("", "-wal", "-shm", "-reserve"):
         try:
             total += os.stat(f"{os.fspath(path)}{suffix}").st_size
-        except FileNotFoundError:
+        except OSError:  # not there, or its folder is gone
             continue
     return total
 
@@ -129,6 +143,7 @@ def stats_from(
             oldest_queued_at=None,
             newest_queued_at=None,
             file_bytes=file_bytes(path),
+            volume=look_at(os.path.dirname(os.path.abspath(path))),
             quarantined=None,
             leased=0,
             damaged=_damage_found(path),
@@ -163,6 +178,7 @@ def stats_from(
         oldest_queued_at=oldest[0] if oldest else None,
         newest_queued_at=newest[0] if newest else None,
         file_bytes=file_bytes(path),
+        volume=look_at(os.path.dirname(os.path.abspath(path))),
         quarantined=quarantined[0] if quarantined else None,
         leased=int(leased),
         service=service,

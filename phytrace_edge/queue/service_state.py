@@ -14,7 +14,7 @@ from phytrace_edge.queue.database import Database
 
 
 def write_service_state(
-    db: Database, document: Mapping[str, Any], running: bool, now: float
+    db: Database, document: Mapping[str, Any], running: bool, now: float, durable: bool = True
 ) -> None:
     row = (now, int(running), orjson.dumps(document).decode())
     db.write(
@@ -22,5 +22,6 @@ def write_service_state(
             "INSERT OR REPLACE INTO service_state(id, heartbeat_at, running, document) "
             "VALUES (1, ?, ?, ?)",
             row,
-        )
+        ),
+        durable,
     )

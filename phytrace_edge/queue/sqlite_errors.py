@@ -6,6 +6,8 @@ Every module of ``queue/`` that touches SQLite raises through ``queue_error``, s
 
 from __future__ import annotations
 
+import errno
+import os
 import sqlite3
 
 from phytrace_edge.errors import QueueBusyError, QueueDamagedError, QueueError, QueueFullError
@@ -14,6 +16,7 @@ from phytrace_edge.errors import QueueBusyError, QueueDamagedError, QueueError, 
 SQLITE_PERM, SQLITE_BUSY, SQLITE_LOCKED, SQLITE_READONLY = 3, 5, 6, 8
 SQLITE_IOERR, SQLITE_CORRUPT, SQLITE_FULL, SQLITE_CANTOPEN = 10, 11, 13, 14
 SQLITE_NOTADB = 26
+FULL_BELOW_BYTES = 64 * 1024
 _CODE_BY_TEXT = {
     "file is not a database": SQLITE_NOTADB,
     "database disk image is malformed": SQLITE_CORRUPT,
@@ -48,10 +51,30 @@ def sqlite_code(exc: sqlite3.Error) -> int | None:
     return next((c for text, c in _CODE_BY_TEXT.items() if text in str(exc)), None)
 
 
+def io_cause(path: object) -> str | None:
+    """What the file system says about the queue file when SQLite reports only a "disk
+    I/O error": a read-only volume (ext4 remounts itself read-only after an error), a
+    folder that is gone, a full volume. Opening for writing writes nothing."""
+    folder = os.path.dirname(os.path.abspath(str(path)))
+    if not os.path.isdir(folder):
+        return "the queue's folder is gone"
+    try:
+        os.close(os.open(str(path), os.O_WRONLY | os.O_CLOEXEC))
+    except OSError as exc:
+        if exc.errno != errno.ENOENT:
+            return f"{exc.strerror.lower() if exc.strerror else exc}"
+    free = os.statvfs(folder)
+    if free.f_bavail * free.f_frsize < FULL_BELOW_BYTES:
+        return "no space left on the volume"
+    return None
+
+
 def queue_error(exc: sqlite3.Error, path: object) -> QueueError:
     """Map a SQLite error to the queue error type, with a message that says what to do."""
     code = sqlite_code(exc)
     message = f"queue {path}: {_HINTS.get(code, str(exc)) if code is not None else exc}"
+    if code == SQLITE_IOERR and (cause := io_cause(path)) is not None:
+        message = f"queue {path}: disk I/O error: {cause} - check the disk (dmesg) and its mount"
     if code == SQLITE_FULL:
         return QueueFullError(message)
     if code in (SQLITE_BUSY, SQLITE_LOCKED):

@@ -24,13 +24,12 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import orjson
-
-from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
-from phytrace_edge.queue import claims, leases, maintenance
-from phytrace_edge.queue.caps import Caps, wal_reserve
+from phytrace_edge.errors import QueueDamagedError, QueueError
+from phytrace_edge.queue import claims, file_watch, leases, maintenance
+from phytrace_edge.queue.appender import Appender
+from phytrace_edge.queue.caps import Caps, VolumeSpace, wal_reserve
 from phytrace_edge.queue.clock import SystemClocks
-from phytrace_edge.queue.codecs import Codecs, Encoded
+from phytrace_edge.queue.codecs import Codecs
 from phytrace_edge.queue.database import Database, configure
 from phytrace_edge.queue.dead_letters import DeadLetterBox, dead_letter_row
 from phytrace_edge.queue.defaults import (
@@ -40,7 +39,7 @@ from phytrace_edge.queue.defaults import (
     DEFAULT_SYNC,
 )
 from phytrace_edge.queue.dictionaries import load_dictionaries
-from phytrace_edge.queue.frames import FRAME_EVENTS, SEAL_AFTER_S, Sealer, decode_rows
+from phytrace_edge.queue.frames import FRAME_EVENTS, Sealer, decode_rows
 from phytrace_edge.queue.full_disk import FullDisk
 from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.migrate import migrate
@@ -50,7 +49,6 @@ from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
 from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
 from phytrace_edge.queue.repair import ClockKeeper
 from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
-from phytrace_edge.queue.rows import NewRow, insert_rows
 from phytrace_edge.queue.service_state import write_service_state
 from phytrace_edge.queue.sqlite_errors import queue_error
 
@@ -89,14 +87,18 @@ class QueueStore:
         self._claims = itertools.count(1)
         self.busy_timeout_s = DEFAULT_BUSY_TIMEOUT_S
         self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S  # monotonic
-        self._caps = Caps(limits, db.page_size, self.codecs, frame_events)
+        volume = VolumeSpace(db.path, limits.max_bytes)  # the cap follows the volume
+        self._caps = Caps(limits, db.page_size, self.codecs, frame_events, volume)
         self._wal_reserve = wal_reserve(limits.max_bytes)
-        self._full_disk = FullDisk(db, self._wal_reserve)
+        self._full_disk = FullDisk(db, volume)
         db.size_wal(self._wal_reserve)
         load_dictionaries(db, self.codecs, self._clock())
         self._sealer = Sealer(self.codecs, frame_events)
-        self._seal_after = 0.0  # store clock: no sealing before (the disk was full)
+        self._appender = Appender(
+            db, self.codecs, self._caps, self._full_disk, self._sealer, self._clock, self._clocks
+        )
         self.dead_letters = DeadLetterBox(db, self.codecs, self._caps, self._clock)
+        self.file_keeper = file_watch.FileKeeper(db, self._wal_reserve)
 
     @classmethod
     def open(
@@ -163,6 +165,13 @@ class QueueStore:
     def close(self) -> None:
         self._db.close()
         self._owner.close()
+        self.file_keeper.close()
+
+    def watch_file(self) -> file_watch.FileState:
+        """Whether the queue file is still at its path; a file deleted, moved or
+        replaced is copied back from the open connection (``file_watch``). Called every
+        heartbeat."""
+        return self.file_keeper.watch()
 
     def now(self) -> float:
         """Queue time (``clock``), which never steps, or a test's own clock."""
@@ -181,67 +190,26 @@ class QueueStore:
         return self.put_many([event], [important])
 
     def put_many(
-        self, events: Sequence[dict[str, Any]], important: Sequence[bool] | None = None
+        self,
+        events: Sequence[dict[str, Any]],
+        important: Sequence[bool] | None = None,
+        after_commit: Callable[[], None] | None = None,
+        upkeep: bool = True,
     ) -> PutResult:
-        """Queue events in one transaction (group commit); ``important`` gives each
-        event's class (default: all periodic). Never raises for a full queue or a full
-        disk: what cannot be kept is counted as a drop and logged."""
-        classes = important if important is not None else [False] * len(events)
-        rows = [self._encode(event, cls) for event, cls in zip(events, classes, strict=True)]
-        if not rows:
-            return PutResult(0, 0)
-        try:
-            return self._insert(rows)
-        except QueueFullError:
-            if self.limits.makes_room and self._full_disk.evict_oldest(
-                max(len(rows), self._db.counter("depth") // 100), self._clock()
-            ):
-                with contextlib.suppress(QueueFullError):
-                    return self._insert(rows)
-            self._full_disk.refused(self.path, len(rows))
-            return PutResult(0, len(rows))
+        """Queue events in one transaction (group commit): ``Appender.put_many``."""
+        return self._appender.put_many(events, important, after_commit, upkeep)
 
-    def _encode(self, event: dict[str, Any], important: bool) -> tuple[str, bool, int, Encoded]:
-        raw = orjson.dumps(event)
-        return str(event.get("event_id", "")), important, len(raw), self.codecs.encode(raw)
+    def count_unqueued(self, reason: str, count: int) -> None:
+        """Count events built that never reached the queue: ``Appender.count_unqueued``."""
+        self._appender.count_unqueued(reason, count)
 
-    def _insert(self, rows: list[tuple[str, bool, int, Encoded]]) -> PutResult:
-        now = self._clock()
-        sizes = [len(encoded.body) for *_, encoded in rows]
-        if self._full_disk.refuses(sizes):
-            raise QueueFullError(f"queue {self.path}: disk full")
-        with self._db.transaction() as cursor:
-            accepted = self._caps.make_room(cursor, rows, sizes, now)
-            insert_rows(
-                cursor,
-                [
-                    NewRow(eid, int(important), now, e.codec, e.dict_id, size, e.body)
-                    for eid, important, size, e in accepted
-                ],
-                queued_total=len(rows),  # every event put, whatever the caps did with it
-            )
-        self._seal(now)
-        self._db.bound_wal(self._wal_reserve)
-        return PutResult(len(accepted), len(rows) - len(accepted))
+    def defer_counts(self, counts: Mapping[str, int]) -> None:
+        """Add counts with the next transaction that commits (a previous run's)."""
+        self._db.defer_counts(**counts)
 
-    def _seal(self, now: float) -> None:
-        """Pack what has waited into frames, in a transaction of its own after the put:
-        the put is durable whatever happens here."""
-        if now < self._seal_after:
-            return
-        if not self._full_disk.has_room_to_seal(self.path):
-            self._seal_after = now + SEAL_AFTER_S
-            return
-        looked_below = self._sealer.sealed_below
-        try:
-            with self._db.transaction() as cursor:
-                sealed = self._sealer.seal(cursor, now)
-        except QueueError:
-            self._sealer.sealed_below = looked_below  # rolled back: look again later
-            self._seal_after = now + SEAL_AFTER_S
-            return
-        if sealed:
-            self._caps.room.forget()
+    def unwritten_counts(self) -> dict[str, int]:
+        """Counts kept in memory because the queue could not be written."""
+        return self._db.deferred_counts()
 
     # ------------------------------------------------------------------ claim / ack
 
@@ -360,15 +328,20 @@ class QueueStore:
         if time.monotonic() >= self.next_check_at:
             self.next_check_at = time.monotonic() + INTEGRITY_EVERY_S
             check_integrity(self.path, self.busy_timeout_s)
-        reserve = self._db.reserve
-        if reserve is not None and not reserve.held() and reserve.restore():
-            log.info("queue %s: the disk has room again; the reserve is back", self.path)
+        self._full_disk.restore_reserve()
 
     # ------------------------------------------------------------------ state
 
-    def write_service_state(self, document: Mapping[str, Any], running: bool) -> None:
+    def write_service_state(
+        self, document: Mapping[str, Any], running: bool, durable: bool = True
+    ) -> None:
         """Record the running service's figures for ``status`` (another process)."""
-        write_service_state(self._db, document, running, self._clock())
+        write_service_state(self._db, document, running, self._clock(), durable)
+
+    def locked(self) -> contextlib.AbstractContextManager[object]:
+        """The queue's lock: what is read under it is one moment of the queue (a put's
+        ``after_commit`` runs under it too)."""
+        return self._db.lock
 
     def counter(self, name: str) -> int:
         """One of the queue's exact counters (``depth``, ``stored_bytes``, ...)."""

@@ -45,6 +45,38 @@ class StageFigures(TypedDict, total=False):
     failed: str | None
 
 
+class WriterFigures(TypedDict):
+    """How the queue's disk is doing, as the writer sees it (``QueueWriter.figures``)."""
+
+    backlog: int  # events built and waiting in memory for the disk
+    backlog_max: int  # beyond it a live input's newest events are dropped
+    oldest_backlog_age_s: float | None
+    writes_failing_s: float | None  # how long queue writes have failed, None if they work
+    write_attempts_failed: int
+    last_write_error: str | None
+    commit_s: float | None  # the last group commit
+    commit_max_s: float | None  # the slowest in the last minute
+
+
+class LedgerFigures(TypedDict):
+    """This run's events at one moment: built = written + in_memory + dropped."""
+
+    built: int
+    written: int  # handed to the queue (which counts what its caps did with them)
+    in_memory: int
+    dropped: dict[str, int]  # before the queue: writer_backlog, unwritable
+
+
+class QueueFileFigures(TypedDict, total=False):
+    """Whether the queue file is still where QUEUE_PATH says (``queue/file_watch.py``)."""
+
+    state: str  # ok, deleted, moved, replaced, folder_gone
+    detail: str | None  # what happened and what the bridge did, one line
+    open_path: str | None  # where the open file is now (moved), from /proc
+    restored: int  # times the file was restored at QUEUE_PATH from the open copy
+    volume_free_bytes: int | None
+
+
 class ServiceDocument(TypedDict, total=False):
     pid: int
     version: str
@@ -57,14 +89,25 @@ class ServiceDocument(TypedDict, total=False):
     stages: dict[str, StageFigures]
     events_built: int
     writer_dropped: int
+    writer: WriterFigures
+    ledger: LedgerFigures
+    queue_file: QueueFileFigures
+    queue_counters: dict[str, int]  # the queue's counters at the heartbeat (live status)
+    unwritten_counts: dict[str, int]  # counts the queue could not take yet (live status)
+    boottime: float  # CLOCK_BOOTTIME at the heartbeat (live status)
+    heartbeat_at: float  # queue time at the heartbeat (live status)
+    running: bool  # (live status)
 
 
 class QueueSection(TypedDict):
     path: str
     depth: int
-    bytes: int
-    cap_bytes: int
-    fill: float
+    bytes: int  # of the queue's files on disk
+    cap_bytes: int  # QUEUE_MAX_BYTES
+    held_bytes: int  # of the events held (the stored_bytes counter)
+    effective_cap_bytes: int  # what events may take: of QUEUE_MAX_BYTES or the volume
+    cap_limited_by: str  # "QUEUE_MAX_BYTES" or "volume"
+    fill: float  # held_bytes / effective_cap_bytes
     oldest_age_s: float | None
     quarantined: str | None
     damaged: str | None
@@ -83,10 +126,39 @@ class ClockSection(TypedDict):
     last_step_at: str | None
 
 
+class Accounting(TypedDict):
+    """Every event built for this queue, accounted for: built = delivered + exported +
+    queued + dead_lettered + sum(dropped) + in_memory."""
+
+    built: int
+    delivered: int
+    exported: int
+    queued: int
+    dead_lettered: int
+    dropped: dict[str, int]
+    in_memory: int
+    balanced: bool
+
+
+class StorageSection(TypedDict):
+    """The queue's disk as the running service sees it (None-valued when not running)."""
+
+    writes_failing_s: float | None
+    last_write_error: str | None
+    backlog: int
+    backlog_max: int
+    oldest_backlog_age_s: float | None
+    commit_s: float | None
+    commit_max_s: float | None
+    file: str  # ok, deleted, moved, replaced, folder_gone (unknown when not running)
+    file_detail: str | None
+
+
 class StatusReport(TypedDict):
     healthy: bool
     running: bool
     problems: list[str]
+    warnings: list[str]  # worth a look, not unhealthy (a slow disk)
     heartbeat_age_s: float | None
     service: dict[str, Any]  # pid, version, input, source_id, endpoint_host, started_at
     queue: QueueSection
@@ -111,3 +183,5 @@ class StatusReport(TypedDict):
     stages: dict[str, StageFigures]
     topics: dict[str, dict[str, Any]]
     clock: ClockSection
+    accounting: Accounting
+    storage: StorageSection

@@ -16,14 +16,30 @@ from typing import Any, NamedTuple, cast
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
 from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.queue.volume import LIMIT_VOLUME
 from phytrace_edge.runtime.documents import (
+    Accounting,
     Lanes,
+    QueueFileFigures,
     SenderFigures,
     ServiceDocument,
     StageFigures,
     StatusReport,
+    StorageSection,
+    WriterFigures,
 )
 from phytrace_edge.udm.event import format_timestamp
+from phytrace_edge.units import format_bytes
+
+SLOW_DISK_S = 5.0  # events waiting longer than this in memory: not durable in time
+SLOW_COMMIT_S = 1.0  # a commit this slow is worth a warning
+
+
+class Live(NamedTuple):
+    """The service's live status file (``runtime/live_status.py``) and its age."""
+
+    document: ServiceDocument
+    age_s: float
 
 
 class Thresholds(NamedTuple):
@@ -46,24 +62,50 @@ def _date(queue_time: float | None, stats: QueueStats) -> str | None:
     return None if queue_time is None else format_timestamp(queue_time + stats.clock.wall_offset)
 
 
-def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
-    """The status document (docs/operations.md lists its keys) with ``healthy`` and
-    ``problems``."""
+class Heard(NamedTuple):
+    """The service's last word: its document, how old it is, whether it said it runs."""
+
+    document: ServiceDocument
+    age_s: float | None
+    claims_to_run: bool
+    from_live: bool = False
+
+
+def last_heard(stats: QueueStats, now: float, live: Live | None) -> Heard:
+    """The fresher of the heartbeat row in the queue and the live status file (which
+    the service writes even when the queue's volume fails: ``live_status``)."""
     state = stats.service
-    service = cast(ServiceDocument, state.document if state else {})
+    row_age = None if state is None else round(now - state.heartbeat_at, 1)
+    if live is not None and (row_age is None or live.age_s <= row_age):
+        running = bool(live.document.get("running"))
+        return Heard(live.document, round(live.age_s, 1), running, from_live=True)
+    if state is None:
+        return Heard(cast(ServiceDocument, {}), None, False)
+    return Heard(cast(ServiceDocument, state.document), row_age, state.running)
+
+
+def report(
+    stats: QueueStats, limits: Thresholds, now: float, live: Live | None = None
+) -> StatusReport:
+    """The status document (docs/operations.md lists its keys) with ``healthy`` and
+    ``problems``; ``live`` is the service's live status, when there is one."""
+    service, heartbeat_age, claims_to_run, from_live = last_heard(stats, now, live)
     sender: SenderFigures = service.get("sender", {})
-    heartbeat_age = None if state is None else round(now - state.heartbeat_at, 1)
     oldest_age = None if stats.oldest_queued_at is None else round(now - stats.oldest_queued_at, 1)
     last_success = sender.get("last_success_at")
-    claims_to_run = state is not None and state.running
     running = claims_to_run and heartbeat_age is not None and heartbeat_age <= limits.health_stale_s
     stages: dict[str, StageFigures] = service.get("stages", {})
+    writer: WriterFigures | None = service.get("writer") if running else None
+    queue_file = service.get("queue_file", {}) if running else {}
 
     problems = []
+    warnings: list[str] = []
     if claims_to_run and not running:
         problems.append(f"heartbeat is {heartbeat_age:.0f} s old: the service hung or died")
     if running:
         problems += _stage_problems(stages, limits.health_stale_s)
+        problems += _storage_problems(writer, queue_file)
+        warnings += _storage_warnings(writer)
     if sender.get("last_status") in (401, 403) and (sender.get("last_error_at") or 0) > (
         last_success or 0
     ):
@@ -77,9 +119,15 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
         and now - queue_error_at < limits.health_stale_s
     ):
         problems.append(f"the sender cannot use the queue: {sender.get('last_queue_error')}")
-    fill = stats.file_bytes / limits.queue_max_bytes if limits.queue_max_bytes else 0.0
+    # what the queue holds (not its file, which shrinks only at a VACUUM) against the
+    # effective cap: QUEUE_MAX_BYTES, or what the volume can hold when that is less
+    cap = stats.effective_cap(limits.queue_max_bytes)
+    fill = stats.held_bytes / cap.bytes if cap.bytes else float(stats.held_bytes > 0)
     if fill > limits.queue_warn_fraction:
-        problems.append(f"queue is {fill:.0%} of QUEUE_MAX_BYTES")
+        problems.append(
+            f"queue is {fill:.0%} of its cap ({_limit_name(cap.limited_by)}): "
+            f"{format_bytes(stats.held_bytes)} held of {format_bytes(cap.bytes)}"
+        )
     waited = oldest_age is not None and oldest_age > limits.no_progress_s
     idle = last_success is None or now - last_success > limits.no_progress_s
     if stats.depth and waited and idle:
@@ -94,10 +142,19 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
             f"the queue file is damaged ({stats.damaged}): restart the bridge to move it aside"
         )
 
+    counters = stats.counters
+    stopped_unrecorded = from_live and not claims_to_run and service.get("unwritten_counts")
+    if (running or stopped_unrecorded) and service.get("queue_counters"):
+        # one moment with the ledger; or a stop whose last counts the queue could not
+        # take (the file may be readable only as it was before its WAL: a read-only
+        # volume), as the service last read them
+        counters = service["queue_counters"]
+    in_memory = service.get("ledger", {}).get("in_memory", 0) if running else 0
     return {
         "healthy": not problems and running,
         "running": running,
         "problems": problems,
+        "warnings": warnings,
         "heartbeat_age_s": heartbeat_age,
         "service": {
             key: service.get(key)
@@ -110,6 +167,9 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
             "depth": stats.depth,
             "bytes": stats.file_bytes,
             "cap_bytes": limits.queue_max_bytes,
+            "held_bytes": stats.held_bytes,
+            "effective_cap_bytes": cap.bytes,
+            "cap_limited_by": cap.limited_by,
             "fill": round(fill, 4),
             "oldest_age_s": oldest_age,
             "quarantined": stats.quarantined,
@@ -117,7 +177,7 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
         },
         "lanes": _lanes(sender, oldest_age, now),
         "resolution": list(stats.resolution),
-        "drops": _drops(stats.drops, service),
+        "drops": {k[5:]: v for k, v in counters.items() if k.startswith("drop:") and v},
         "dead_letters": stats.dead_letters,
         "queued_total": stats.queued_total,
         "sent_total": stats.acked_total,
@@ -140,7 +200,79 @@ def report(stats: QueueStats, limits: Thresholds, now: float) -> StatusReport:
             "last_step_s": stats.clock.last_step_s,
             "last_step_at": _date(stats.clock.last_step_at, stats),
         },
+        "accounting": accounting(counters, in_memory),
+        "storage": _storage(writer, queue_file),
     }
+
+
+def accounting(counters: dict[str, int], in_memory: int) -> Accounting:
+    """Every event built for this queue, accounted for (docs/operations.md, "Nothing
+    lost"): built = delivered + exported + queued + dead_lettered + dropped + in_memory.
+    ``queued_total`` counts every event built that reached the writer's end: put,
+    refused by a full disk, or dropped before the queue (``QueueStore.count_unqueued``)."""
+    drops = {k[5:]: v for k, v in counters.items() if k.startswith("drop:") and v}
+    # dead letters put back into the queue (``dead-letters requeue``) count as queued
+    dead = drops.pop("rejected", 0) - counters.get("requeued_total", 0)
+    built = counters.get("queued_total", 0) + in_memory
+    delivered, exported = counters.get("acked_total", 0), counters.get("exported_total", 0)
+    queued = counters.get("depth", 0)
+    return {
+        "built": built,
+        "delivered": delivered,
+        "exported": exported,
+        "queued": queued,
+        "dead_lettered": dead,
+        "dropped": drops,
+        "in_memory": in_memory,
+        "balanced": built == delivered + exported + queued + dead + sum(drops.values()) + in_memory,
+    }
+
+
+def _storage(writer: WriterFigures | None, queue_file: QueueFileFigures) -> StorageSection:
+    w = cast(WriterFigures, writer or {})
+    return {
+        "writes_failing_s": w.get("writes_failing_s"),
+        "last_write_error": w.get("last_write_error"),
+        "backlog": w.get("backlog", 0),
+        "backlog_max": w.get("backlog_max", 0),
+        "oldest_backlog_age_s": w.get("oldest_backlog_age_s"),
+        "commit_s": w.get("commit_s"),
+        "commit_max_s": w.get("commit_max_s"),
+        "file": queue_file.get("state", "ok" if writer is not None else "unknown"),
+        "file_detail": queue_file.get("detail"),
+    }
+
+
+def _storage_problems(writer: WriterFigures | None, queue_file: QueueFileFigures) -> list[str]:
+    """What keeps events from being made durable, as the running service sees it."""
+    problems = []
+    if queue_file.get("state", "ok") != "ok":
+        problems.append(str(queue_file.get("detail")))
+    if writer is None:
+        return problems
+    failing = writer.get("writes_failing_s")
+    if failing is not None:
+        problems.append(
+            f"queue writes have failed for {failing:.0f} s: {writer.get('last_write_error')}; "
+            f"{writer['backlog']} event(s) wait in memory (at most {writer['backlog_max']})"
+        )
+    elif (waited := writer.get("oldest_backlog_age_s")) is not None and waited > SLOW_DISK_S:
+        problems.append(
+            f"events wait {waited:.0f} s in memory before they reach the disk "
+            f"({writer['backlog']} waiting; commits take {writer.get('commit_s')} s) "
+            "- the queue's disk is too slow"
+        )
+    return problems
+
+
+def _storage_warnings(writer: WriterFigures | None) -> list[str]:
+    slowest = None if writer is None else writer.get("commit_max_s")
+    if slowest is not None and slowest >= SLOW_COMMIT_S:
+        return [
+            f"the queue's disk is slow: a commit took {slowest:.1f} s in the last minute "
+            "(an SD card or eMMC wearing out?)"
+        ]
+    return []
 
 
 def _lanes(sender: SenderFigures, oldest_age: float | None, now: float) -> Lanes:
@@ -174,15 +306,6 @@ def _topics_now(
     return now
 
 
-def _drops(queue_drops: dict[str, int], service: ServiceDocument) -> dict[str, int]:
-    """Drops by reason: the queue's, and the service's hand-off to it (the disk stalled
-    so long that the writer fell HANDOFF_MAX_EVENTS behind)."""
-    drops = dict(queue_drops)
-    if service.get("writer_dropped"):
-        drops["writer_backlog"] = service["writer_dropped"]
-    return drops
-
-
 def stalled(progress_age_s: float | None, stall_after_s: float) -> bool:
     """The one rule for a stage that makes no progress: past the service's bound
     (``stall_after_s``, written with each stage), the watchdog is no longer fed and
@@ -205,3 +328,8 @@ def exit_code(document: StatusReport) -> int:
     if document["problems"]:
         return EXIT_UNHEALTHY
     return EXIT_OK if document["running"] else EXIT_NOT_RUNNING
+
+
+def _limit_name(limited_by: str) -> str:
+    """Which limit set the effective cap, in words (``volume.Cap.limited_by``)."""
+    return "what the volume can hold" if limited_by == LIMIT_VOLUME else limited_by

@@ -16,8 +16,8 @@ from phytrace_edge.builder.builder import Built
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.ingest.convert import present
 from phytrace_edge.queue.inspect import QueueStats
-from phytrace_edge.runtime.documents import StatusReport
-from phytrace_edge.runtime.health import Thresholds, report
+from phytrace_edge.runtime.documents import ServiceDocument, StatusReport
+from phytrace_edge.runtime.health import Live, Thresholds, report
 
 EVENT_TYPE_HEALTH = "bridge.health"
 PROBLEMS_MAX = 64
@@ -123,11 +123,19 @@ class HealthEvents:
         self._started_at = started_at
         self._emit = emit
 
-    def emit_if_due(self, stats: QueueStats, now: float, trigger: str | None = None) -> None:
-        """An event when the schedule says so, or now with ``trigger`` (``stop``)."""
+    def emit_if_due(
+        self,
+        stats: QueueStats,
+        now: float,
+        trigger: str | None = None,
+        live: ServiceDocument | None = None,
+    ) -> None:
+        """An event when the schedule says so, or now with ``trigger`` (``stop``);
+        ``live`` is the service's document of this moment."""
         if self._thresholds is None or not self._schedule.interval_s:
             return
-        document = report(stats, self._thresholds, now)
+        heard = None if live is None else Live(live, 0.0)
+        document = report(stats, self._thresholds, now, heard)
         trigger = self._schedule.trigger(document["healthy"], now) if trigger is None else trigger
         if trigger is not None:
             captured_at = now + stats.clock.wall_offset  # an event's time is a date

@@ -4,22 +4,34 @@ the queue every ``HEARTBEAT_S`` (``Heartbeat``)."""
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any, NamedTuple, cast
 
 from phytrace_edge._version import __version__
+from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.inspect import QueueStats
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime.documents import SenderFigures, ServiceDocument, StageFigures
+from phytrace_edge.runtime import live_status
+from phytrace_edge.runtime.documents import (
+    LedgerFigures,
+    QueueFileFigures,
+    SenderFigures,
+    ServiceDocument,
+    StageFigures,
+    WriterFigures,
+)
 from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
 from phytrace_edge.runtime.supervisor import Supervisor
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.stats import SendStats
+
+log = logging.getLogger(__name__)
 
 HEARTBEAT_S = 2.0
 RATE_SMOOTHING = 0.3  # weight of the newest interval in the rate averages
@@ -36,6 +48,7 @@ class Figures:
     topics: dict[str, dict[str, Any]]
     thread_restarts: dict[str, int]
     now: float
+    writer: WriterFigures | None = None
 
 
 @dataclass
@@ -79,6 +92,20 @@ def topic_report(
     }
 
 
+class Moment(NamedTuple):
+    """The queue and its disk at one heartbeat: this run's ledger and the queue's
+    counters read at the same moment, the writer's figures, the queue file's state."""
+
+    ledger: LedgerFigures
+    writer: WriterFigures
+    queue_file: QueueFileFigures
+    queue_counters: dict[str, int]  # counts not yet written included
+    unwritten_counts: dict[str, int]  # of those, the ones only in memory
+    heartbeat_at: float  # queue time
+    running: bool
+    boottime: float = 0.0
+
+
 def service_document(
     options: ServiceOptions,
     sender: SenderFigures,
@@ -87,9 +114,11 @@ def service_document(
     events_built: int,
     writer_dropped: int,
     started_at: float,
+    moment: Moment,
 ) -> ServiceDocument:
-    """What the heartbeat row holds (``status`` reads it)."""
+    """What the heartbeat row and the live status file hold (``status`` reads them)."""
     return {
+        **moment._asdict(),  # type: ignore[typeddict-item]
         "pid": os.getpid(),
         "version": __version__,
         "started_at": started_at,
@@ -105,8 +134,9 @@ def service_document(
 
 
 class Heartbeat:
-    """Reads the figures of the running parts; ``write`` puts them into the queue
-    file for ``status``, ``figures`` hands them to the metrics endpoint."""
+    """Reads the figures of the running parts; ``write`` puts them into the live status
+    file and the queue file for ``status``, ``figures`` hands them to the metrics
+    endpoint."""
 
     def __init__(
         self,
@@ -117,11 +147,16 @@ class Heartbeat:
         outlet: Outlet,
         supervisor: Supervisor,
         started_at: float,
+        live_path: str | None = None,
     ) -> None:
         self.options, self.pipeline, self.store = options, pipeline, store
         self.sender, self.outlet, self.supervisor = sender, outlet, supervisor
         self.started_at = started_at
+        self.live_path = live_path
         self._rates = Rates()
+        self._live_failed = False
+        self.last_stats: QueueStats | None = None
+        self.last_document: ServiceDocument | None = None
 
     def topics(self, rates: Mapping[str, float]) -> dict[str, dict[str, Any]]:
         known = self.pipeline.source.topic_stats()
@@ -151,25 +186,33 @@ class Heartbeat:
 
     def figures(self) -> Figures:
         """The live figures the metrics endpoint shows."""
+        try:
+            queue = self.last_stats = self.store.stats()
+        except QueueError:
+            if self.last_stats is None:
+                raise
+            queue = self.last_stats  # the queue cannot be read now: its last figures
         return Figures(
-            queue=self.store.stats(),
+            queue=queue,
             sender=self.sender.stats,
             events_built=self.outlet.events_built,
             writer_dropped=self.outlet.writer.events_dropped,
             topics=self.topics(self._rates.rates),
             thread_restarts=dict(self.supervisor.restarts),
             now=self.store.now(),
+            writer=self.outlet.writer.figures(),
         )
 
-    def write(self, running: bool) -> None:
-        """Write the figures `status` shows (another process reads them)."""
+    def document(self, running: bool) -> ServiceDocument:
+        """The service's figures now, with the queue's counters and the disk's figures
+        taken at one moment (the accounting adds up in it)."""
         counters = {
             "send": self.sender.stats.events_sent,
             **{f"topic:{t}": n for t, n in self.pipeline.dispatcher.received.items()},
         }
         rates = self._rates.update(counters, time.monotonic())
         sender = cast(SenderFigures, self.sender.stats.as_dict())
-        document = service_document(
+        return service_document(
             self.options,
             {**sender, "send_rate_eps": rates.get("send", 0.0)},
             self.topics(rates),
@@ -177,5 +220,53 @@ class Heartbeat:
             self.outlet.events_built,
             self.outlet.writer.events_dropped,
             self.started_at,
+            self.moment(running),
         )
-        self.store.write_service_state(document, running)
+
+    def moment(self, running: bool) -> Moment:
+        writer = self.outlet.writer
+        try:
+            stats, ledger = writer.snapshot()
+            self.last_stats = stats
+        except QueueError:  # the queue cannot be read now: its last figures
+            ledger = writer.ledger()
+        keeper = self.store.file_keeper
+        return Moment(
+            ledger=ledger,
+            writer=writer.figures(),
+            queue_file={
+                "state": keeper.state.state,
+                "detail": keeper.state.describe(self.store.path),
+                "open_path": keeper.state.open_path,
+                "restored": keeper.restored,
+            },
+            queue_counters={} if self.last_stats is None else dict(self.last_stats.counters),
+            unwritten_counts=self.store.unwritten_counts(),
+            heartbeat_at=self.store.now(),
+            running=running,
+            boottime=live_status.boottime(),
+        )
+
+    def write(self, running: bool) -> ServiceDocument:
+        """Write the figures `status` shows (another process reads them): to the live
+        status file, then into the queue file (which raises QueueError when the queue
+        cannot be written; the live file says why). Without an fsync of its own: the
+        row is news, not data (the next put's commit syncs it), and flash wears."""
+        document = self.last_document = self.document(running)
+        self.write_live(document)
+        self.store.write_service_state(document, running, durable=False)
+        if document["unwritten_counts"]:  # that write took them: the live file says so
+            document["unwritten_counts"] = self.store.unwritten_counts()
+            self.write_live(document)
+        return document
+
+    def write_live(self, document: ServiceDocument) -> None:
+        if self.live_path is None:
+            return
+        try:
+            live_status.write(self.live_path, cast(dict[str, Any], document))
+            self._live_failed = False
+        except OSError as exc:
+            if not self._live_failed:  # once, not every beat
+                log.warning("cannot write the live status %s: %s", self.live_path, exc)
+            self._live_failed = True

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import sys
+import time
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -107,3 +108,36 @@ def configure_logging(
     root.setLevel(level)
     # one INFO line per HTTP request would drown the log; failures are logged by the sender
     logging.getLogger("httpx").setLevel(max(logging.WARNING, root.level))
+
+
+class RepeatedLine:
+    """A trouble that repeats (a queue that cannot be written, every beat): logged the
+    first time, then as one summary every ``every_s`` with how often it happened, and
+    once more when it clears; not a line per occurrence."""
+
+    def __init__(self, what: str, every_s: float, logger: logging.Logger | None = None) -> None:
+        self.what = what
+        self.every_s = every_s
+        self._log = logger or logging.getLogger("phytrace_edge.runtime")
+        self._since: float | None = None
+        self._reported_at = 0.0
+        self._count = 0
+
+    def report(self, line: str, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        self._count += 1
+        if self._since is None:
+            self._since = self._reported_at = now
+            self._count = 0
+            self._log.error("%s", line)
+        elif now - self._reported_at >= self.every_s:
+            self._log.error(
+                "%s (again %d time(s) in %.0f s)", line, self._count, now - self._reported_at
+            )
+            self._reported_at, self._count = now, 0
+
+    def clear(self, now: float | None = None) -> None:
+        if self._since is not None:
+            now = time.monotonic() if now is None else now
+            self._log.warning("%s works again after %.0f s", self.what, now - self._since)
+            self._since = None

@@ -69,8 +69,28 @@ class BridgeCollector:
         )
         for reason, count in stats.drops.items():
             dropped.add_metric([reason], count)
-        dropped.add_metric(["writer_backlog"], figures.writer_dropped)
         yield dropped
+        if (writer := figures.writer) is not None:
+            yield gauge(
+                "writer_backlog_events",
+                "Events built and waiting in memory for the queue's disk.",
+                writer["backlog"],
+            )
+            yield gauge(
+                "queue_commit_seconds",
+                "How long the last group commit to the queue took.",
+                writer["commit_s"],
+            )
+            yield gauge(
+                "queue_commit_max_seconds",
+                "The slowest group commit to the queue in the last minute.",
+                writer["commit_max_s"],
+            )
+            yield gauge(
+                "queue_writes_failing_seconds",
+                "How long queue writes have failed (0 while they work).",
+                writer["writes_failing_s"] or 0.0,
+            )
         restarts = CounterMetricFamily(
             "phytrace_thread_restarts", "Threads restarted after a failure.", labels=["thread"]
         )

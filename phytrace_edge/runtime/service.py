@@ -14,6 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 from phytrace_edge._version import __version__
 from phytrace_edge.errors import QueueError
@@ -23,6 +24,7 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.health import stalled
 from phytrace_edge.runtime.health_events import HealthEvents
 from phytrace_edge.runtime.heartbeat import HEARTBEAT_S, Heartbeat
+from phytrace_edge.runtime.logs import RepeatedLine
 from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
@@ -34,7 +36,11 @@ from phytrace_edge.units import format_bytes
 log = logging.getLogger(__name__)
 
 MAINTENANCE_EVERY_S = 60.0
+REPORT_EVERY_S = 30.0  # a queue that keeps failing: the first line, then a summary
 STOP_TIMEOUT_S = 5.0
+STOP_MARGIN_S = 8.0  # beyond SHUTDOWN_GRACE_S: a commit under way, a request on the wire
+CLOSE_WITHIN_S = 2.0
+T = TypeVar("T")
 
 
 class BridgeService:
@@ -61,6 +67,8 @@ class BridgeService:
         self.supervisor = supervisor
         self.finished = threading.Event()  # a finite input (a bag) was read to its end
         self.store_depth_at_stop = 0
+        self.lost_at_stop = 0  # events built and never written (unwritable)
+        self._queue_trouble = RepeatedLine("queue", REPORT_EVERY_S)
         self._metrics: object | None = None
         self._on_stopped: list[Callable[[], None]] = []
 
@@ -112,13 +120,31 @@ class BridgeService:
 
     def _heartbeat_loop(self, stop: threading.Event, beat: Beat) -> None:
         while not stop.wait(HEARTBEAT_S):
-            try:
-                self.store.record_clocks()  # a step of the wall clock is seen within a beat
-                self.heartbeat.write(running=True)
-                self.health_events.emit_if_due(self.store.stats(), self.store.now())
-            except QueueError as exc:  # busy or full for now: the next beat tries again
-                log.warning("heartbeat not written: %s", exc)
+            self._beat_once()
             beat()
+
+    def _beat_once(self) -> None:
+        """Look after the queue file, write the figures (the live status first, which
+        needs no queue), then what needs the queue: the clocks and a health event."""
+        try:
+            self.store.watch_file()
+        except OSError as exc:  # the descriptor itself failed: say so, go on
+            self._queue_trouble.report(f"cannot look at the queue file: {exc}")
+        document = None
+        try:
+            self.store.record_clocks()  # a step of the wall clock is seen within a beat
+            document = self.heartbeat.write(running=True)
+            stats = self.store.stats()
+        except QueueError as exc:  # failing, busy or full for now: the next beat tries again
+            self._queue_trouble.report(f"heartbeat not written to the queue: {exc}")
+            if document is None:
+                self.heartbeat.write_live(self.heartbeat.document(running=True))
+            return
+        self._queue_trouble.clear()
+        try:
+            self.health_events.emit_if_due(stats, self.store.now(), live=document)
+        except QueueError as exc:
+            self._queue_trouble.report(f"no health event: {exc}")
 
     def _maintenance_loop(self, stop: threading.Event, beat: Beat) -> None:
         due = time.monotonic() + MAINTENANCE_EVERY_S
@@ -132,7 +158,7 @@ class BridgeService:
                 give_back_free_memory()  # a drained backlog's buffers, freed but kept mapped
                 log.debug("queue maintenance pass done")
             except QueueError as exc:
-                log.warning("queue maintenance failed (%s); will try again", exc)
+                self._queue_trouble.report(f"queue maintenance failed ({exc}); will try again")
 
     def healthy(self) -> bool:
         """Whether every worker runs and made progress lately (feeds the watchdog)."""
@@ -148,42 +174,101 @@ class BridgeService:
 
     def shutdown(self, grace_s: float) -> None:
         """Stop in order: ingest, then queue what was built (and a last health event),
-        then let the sender flush for up to ``grace_s``, then the rest."""
+        then let the sender flush, then the rest: the flush within ``grace_s``, the
+        whole stop within ``grace_s + STOP_MARGIN_S + 2 * CLOSE_WITHIN_S`` whatever the
+        disk does (docs/operations.md, "Stopping"). What could not be written by then is
+        counted (``unwritable``) and the process exits non-zero (``lost_at_stop``)."""
+        flush_by = time.monotonic() + grace_s
+        give_up_at = flush_by + STOP_MARGIN_S
+
+        def left(bound: float = STOP_TIMEOUT_S) -> float:
+            return max(0.0, min(bound, give_up_at - time.monotonic()))
+
         sup = self.supervisor
-        sup.stop("sampler", STOP_TIMEOUT_S)
-        sup.stop("ingest", STOP_TIMEOUT_S)
+        sup.stop("sampler", left())
+        sup.stop("ingest", left())
         self.pipeline.close()
-        sup.stop("heartbeat", STOP_TIMEOUT_S)  # it emits health events: none after the writer
-        try:
-            self.health_events.emit_if_due(self.store.stats(), self.store.now(), trigger="stop")
-        except QueueError as exc:
-            log.warning("no stop health event: %s", exc)
-        self.outlet.writer.request_stop()
-        sup.stop("writer", 2 * STOP_TIMEOUT_S)
-        self._flush_sender(grace_s)
+        sup.stop("heartbeat", left())
+        self._stop_health_event()
+        writer = self.outlet.writer
+        writer.request_stop(within_s=max(0.0, flush_by - time.monotonic()))
+        if not sup.stop("writer", left(grace_s + STOP_TIMEOUT_S)):
+            writer.abandon()  # a commit still under way on a disk that hangs
+        self._flush_sender(flush_by)
         for name in ("sender", "maintenance"):
-            sup.stop(name, STOP_TIMEOUT_S)
+            sup.stop(name, left())
         if self._metrics is not None:
             self._metrics.shutdown()  # type: ignore[attr-defined]
         self.sender.transport.close()
-        try:  # the final figures: events_built and the counters agree at a clean stop
+        self.lost_at_stop = writer.dropped["unwritable"]
+        # the final figures: into the queue, and into the live status, which stays (it
+        # keeps counts the queue could not take, and tells the next start of this boot
+        # that a queue was here)
+        run_within(self._record_stop, max(left(), CLOSE_WITHIN_S), "recording the stop")
+        run_within(self.store.close, CLOSE_WITHIN_S, "closing the queue")
+        for callback in self._on_stopped:
+            callback()
+
+    def _stop_health_event(self) -> None:
+        """A last ``bridge.health`` event, from the last heartbeat's figures: the stop
+        does not wait for a slow disk to read them again."""
+        stats, document = self.heartbeat.last_stats, self.heartbeat.last_document
+        if stats is None or document is None:
+            return
+        try:
+            self.health_events.emit_if_due(stats, self.store.now(), trigger="stop", live=document)
+        except QueueError as exc:
+            log.warning("no stop health event: %s", exc)
+
+    def _record_stop(self) -> bool:
+        """The final figures, into the live status and the queue; False when the queue
+        could not take them (the live status then holds the truth)."""
+        writer = self.outlet.writer
+        try:
             self.heartbeat.write(running=False)
             left = self.store_depth_at_stop = self.store.counter("depth")
         except QueueError as exc:
-            log.error("could not record the stop in the queue: %s", exc)
-            left = -1
-        self.store.close()
-        for callback in self._on_stopped:
-            callback()
-        if left >= 0:
-            log.info("stopped; %d event(s) left in the queue for next time", left)
+            self.heartbeat.write_live(self.heartbeat.document(running=False))
+            log.error(
+                "could not record the stop in the queue (%s); the counts are in the live status %s",
+                exc,
+                self.heartbeat.live_path,
+            )
+            return False
+        log.info("stopped; %d event(s) left in the queue for next time", left)
+        if self.lost_at_stop:
+            log.error(
+                "%d event(s) built in this run could not be written to the queue "
+                "before the stop (counted as dropped: unwritable) - check the disk",
+                writer.dropped["unwritable"],
+            )
+        return True
 
-    def _flush_sender(self, grace_s: float) -> None:
+    def _flush_sender(self, deadline: float) -> None:
         """Let the sender send partial batches at once until the queue is empty or
-        ``grace_s`` is over."""
+        the ``deadline`` (monotonic) has come."""
         self.sender.flushing.set()
-        deadline = time.monotonic() + grace_s
         sender = self.supervisor.workers["sender"]
-        while time.monotonic() < deadline and self.store.counter("depth") > 0:
+        while time.monotonic() < deadline and self._depth_or_zero() > 0:
             if sender.done.wait(0.05):
                 break
+
+    def _depth_or_zero(self) -> int:
+        try:
+            return self.store.counter("depth")
+        except QueueError:
+            return 0
+
+
+def run_within(work: Callable[[], T], timeout_s: float, what: str) -> T | None:
+    """``work()``'s result, or None when it did not finish within ``timeout_s``. For
+    the last steps of a stop on a disk that hangs: a commit or a checkpoint can take
+    seconds per fsync. Whatever was committed is durable in the WAL already, so a
+    process that ends during them loses nothing that was counted as queued."""
+    result: list[T] = []
+    worker = threading.Thread(target=lambda: result.append(work()), name=what, daemon=True)
+    worker.start()
+    worker.join(timeout_s)
+    if worker.is_alive():
+        log.warning("%s takes over %.0f s (a slow disk); exiting without it", what, timeout_s)
+    return result[0] if result else None

@@ -22,6 +22,7 @@ imports nothing of the bridge.
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -32,6 +33,7 @@ from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.config import Settings
+from phytrace_edge.errors import QueueError
 from phytrace_edge.host_memory import give_back_free_memory
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Source
@@ -40,7 +42,7 @@ from phytrace_edge.queue.defaults import OnFull
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.ownership import ServiceLock
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime import options
+from phytrace_edge.runtime import live_status, options
 from phytrace_edge.runtime.health_events import HealthEvents
 from phytrace_edge.runtime.heartbeat import Heartbeat
 from phytrace_edge.runtime.outlet import Outlet
@@ -57,6 +59,8 @@ from phytrace_edge.udm.schema import prepare_validator
 # A file being imported is staged a chunk at a time: never full, and events days old
 # must not expire while staged.
 STAGING_LIMITS = QueueLimits(on_full=OnFull.DROP_NEWEST, ttl_s=10 * 365 * 86400.0)
+log = logging.getLogger(__name__)
+
 STAGING_LEASE_S = 600.0  # a chunk of a file is sent before its claims lapse
 
 
@@ -142,6 +146,7 @@ def build_service(
     path = options.queue_path(s)
     warn_if_not_on_a_volume(path, env)
     source = create_source(options.source_options(s, env, ros_args))
+    refuse_a_queue_that_went_missing(str(path), env)
     lock = ServiceLock(path)  # one `run` per queue file
     try:
         store = open_queue(s)
@@ -149,7 +154,9 @@ def build_service(
         lock.release()
         raise
     try:
-        service = _service(s, source, store, transport or http_transport(s), on_event)
+        carry_over_unwritten_counts(store, str(path), env)
+        live_path = live_status.writable_path(str(path), env)
+        service = _service(s, source, store, transport or http_transport(s), on_event, live_path)
     except BaseException:
         store.close()
         lock.release()
@@ -160,12 +167,44 @@ def build_service(
     return service
 
 
+def refuse_a_queue_that_went_missing(path: str, env: Mapping[str, str]) -> None:
+    """A bridge ran on this queue earlier in this boot (its live status says so), and
+    the file is not there now: its volume was unmounted, or its folder moved or
+    removed. Making a new empty queue there would hide the old one's events."""
+    found = live_status.find(path, env)
+    if found is None or Path(path).exists():
+        return
+    live_path, document = found
+    depth = (document.get("queue_counters") or {}).get("depth", "?")
+    raise QueueError(
+        f"queue {path} is missing, but a bridge (pid {document.get('pid', '?')}) used it "
+        f"earlier in this boot with {depth} event(s) queued: is its volume mounted, its "
+        f"folder where it was? To start a fresh queue there, remove {live_path}"
+    )
+
+
+def carry_over_unwritten_counts(store: QueueStore, path: str, env: Mapping[str, str]) -> None:
+    """Counts that the last run of this boot could not write to its queue before it
+    stopped (its disk failed: ``unwritable`` events), kept in its live status file:
+    into the queue now, so that the accounting adds up across the restart."""
+    found = live_status.find(path, env)
+    if found is None or found[1].get("running"):
+        return  # none, or a run that was killed: its last figures are only a snapshot
+    live_path, document = found
+    counts = {k: int(v) for k, v in (document.get("unwritten_counts") or {}).items() if v}
+    if counts:
+        store.defer_counts(counts)
+        log.warning("the last run could not write these counts to the queue: %s; added now", counts)
+        live_status.remove(live_path)  # once: this run writes its own at its start
+
+
 def _service(
     s: Settings,
     source: Source,
     store: QueueStore,
     transport: Transport,
     on_event: Callable[[dict[str, Any]], None] | None,
+    live_path: str | None,
 ) -> BridgeService:
     service_options = options.service_options(s)
     started_at = store.now()
@@ -173,7 +212,9 @@ def _service(
     outlet = Outlet(QueueWriter(store), wait_for_disk=source.keeps_time, on_event=on_event)
     pipeline = build_pipeline(s, source, outlet.emit)
     supervisor = Supervisor()
-    heartbeat = Heartbeat(service_options, pipeline, store, sender, outlet, supervisor, started_at)
+    heartbeat = Heartbeat(
+        service_options, pipeline, store, sender, outlet, supervisor, started_at, live_path
+    )
     health_events = HealthEvents(
         service_options.health_event_interval_s,
         service_options.thresholds,

@@ -18,7 +18,9 @@ from pathlib import Path
 import pytest
 import yaml
 
+from phytrace_edge.config import Settings
 from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
+from phytrace_edge.runtime.service import CLOSE_WITHIN_S, STOP_MARGIN_S
 from tests.processes import BridgeProcess
 
 ROOT = Path(__file__).parents[2]
@@ -52,7 +54,11 @@ def test_unit_has_what_an_operator_needs() -> None:
     for hardening in ("NoNewPrivileges", "ProtectHome", "PrivateTmp", "PrivateDevices"):
         assert service[hardening] == "yes"
     assert service["ProtectSystem"] == "strict"
-    assert int(service["TimeoutStopSec"]) > 5  # above SHUTDOWN_GRACE_S
+    # the stop's bound on any disk (runtime/service.py), for the default SHUTDOWN_GRACE_S
+    longest_stop = Settings().shutdown_grace_s + STOP_MARGIN_S + 2 * CLOSE_WITHIN_S
+    assert int(service["TimeoutStopSec"]) > longest_stop
+    assert service["RuntimeDirectory"] == "phytrace-edge"  # the live status
+    assert service["RuntimeDirectoryPreserve"] == "yes"
     example = (ROOT / "systemd" / "phytrace-edge.env").read_text()
     for variable in REFERENCE_VARIABLES:
         assert f"\n{variable}=" in example

@@ -8,7 +8,7 @@ from typing import get_type_hints
 from phytrace_edge.queue.inspect import QueueStats, ServiceState
 from phytrace_edge.runtime.documents import Lanes, QueueSection, ServiceDocument, StatusReport
 from phytrace_edge.runtime.health import Thresholds, exit_code, report
-from phytrace_edge.runtime.heartbeat import service_document
+from phytrace_edge.runtime.heartbeat import Moment, service_document
 from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.units import GIB
 
@@ -117,6 +117,18 @@ def test_the_status_report_has_exactly_the_declared_keys() -> None:
 
 def test_the_heartbeat_writes_only_declared_keys() -> None:
     options = ServiceOptions("sim", "bot", "amr", "127.0.0.1:9", 5.0, 5.0)
-    document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW)
+    ledger = {"built": 7, "written": 7, "in_memory": 0, "dropped": {}}
+    writer = {
+        "backlog": 0,
+        "backlog_max": 10,
+        "oldest_backlog_age_s": None,
+        "writes_failing_s": None,
+        "write_attempts_failed": 0,
+        "last_write_error": None,
+        "commit_s": 0.01,
+        "commit_max_s": 0.02,
+    }
+    moment = Moment(ledger, writer, {"state": "ok"}, {"queued_total": 7}, {}, NOW, True, 1.0)
+    document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW, moment)
     assert set(document) == set(get_type_hints(ServiceDocument))
     assert report(stats(**document), LIMITS, NOW)["events_built"] == 7

@@ -50,11 +50,12 @@ def test_warns_when_the_volume_is_smaller_than_the_cap(
 ) -> None:
     with caplog.at_level(logging.WARNING):
         open_store(limits=QueueLimits(max_bytes=2**60))
-    assert "the disk will fill before the cap" in caplog.text
+    assert "less than QUEUE_MAX_BYTES" in caplog.text
+    assert "the volume is the cap" in caplog.text
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         open_store("small.db", limits=QueueLimits(max_bytes=2 * MIB))
-    assert "disk will fill" not in caplog.text
+    assert "the volume is the cap" not in caplog.text
 
 
 def test_put_claim_ack_round_trip_keeps_json_exact(open_store) -> None:
