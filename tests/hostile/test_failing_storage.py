@@ -355,3 +355,36 @@ def test_a_volume_gone_read_only_is_named_and_what_could_not_be_written_is_count
     a = balanced(status(env))
     assert a["dropped"] == {"unwritable": unwritable}
     assert stub.stats()["unique"] == a["delivered"] == a["built"] - unwritable
+
+
+def test_a_restart_refuses_to_make_a_new_queue_where_one_went_missing(
+    tmp_path: Path, stub: StubProcess, bridges: list[BridgeProcess]
+) -> None:
+    """umount -l, or the folder moved, between two runs of one boot: the second run
+    must not start an empty queue in the bare mount point and hide the old one."""
+    folder = tmp_path / "q"
+    queue = folder / "queue.db"
+    env = bridge_env(queue, stub)  # PhyCloud down: the queue holds a backlog
+    bridge = start(bridges, tmp_path / "bridge.log", env)
+    wait_for(lambda: status(env)["queue"]["depth"] > 50, 30, "a backlog")
+    stop(bridge, expect=0)
+    held = status(env)["queue"]["depth"]
+    folder.rename(tmp_path / "unmounted")
+    folder.mkdir()  # the bare mount point
+
+    refused = BridgeProcess(tmp_path / "refused.log", **env).start()
+    bridges.append(refused)
+    assert refused.wait(60) == 4
+    line = refused.log.read_text().strip().splitlines()[-1]
+    assert f"queue {queue} is missing" in line and f"with {held} event(s) queued" in line
+    assert "Traceback" not in refused.log.read_text()
+    assert not queue.exists()  # nothing was made in its place
+
+    folder.rmdir()
+    (tmp_path / "unmounted").rename(folder)  # mounted again
+    stub.start()
+    bridge = start(bridges, tmp_path / "bridge2.log", env)
+    wait_for(lambda: status(env)["queue"]["depth"] == 0, 60, "the backlog to drain")
+    stop(bridge, expect=0)
+    a = balanced(status(env))
+    assert a["dropped"] == {} and stub.stats()["unique"] == a["delivered"] == a["built"]

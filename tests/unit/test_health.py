@@ -3,11 +3,11 @@ heartbeat (runtime/health.py), on known inputs."""
 
 from __future__ import annotations
 
-from typing import get_type_hints
+from typing import cast, get_type_hints
 
 from phytrace_edge.queue.inspect import QueueStats, ServiceState
 from phytrace_edge.runtime.documents import Lanes, QueueSection, ServiceDocument, StatusReport
-from phytrace_edge.runtime.health import Thresholds, exit_code, report
+from phytrace_edge.runtime.health import Live, Thresholds, accounting, exit_code, report
 from phytrace_edge.runtime.heartbeat import Moment, service_document
 from phytrace_edge.runtime.options import ServiceOptions
 from phytrace_edge.units import GIB
@@ -132,3 +132,97 @@ def test_the_heartbeat_writes_only_declared_keys() -> None:
     document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW, moment)
     assert set(document) == set(get_type_hints(ServiceDocument))
     assert report(stats(**document), LIMITS, NOW)["events_built"] == 7
+
+
+WRITER_OK = {
+    "backlog": 0,
+    "backlog_max": 10_000,
+    "oldest_backlog_age_s": None,
+    "writes_failing_s": None,
+    "write_attempts_failed": 0,
+    "last_write_error": None,
+    "commit_s": 0.01,
+    "commit_max_s": 0.02,
+}
+
+
+def live(age_s: float, **document) -> Live:
+    """The service's live status file, ``age_s`` old, saying it runs."""
+    return Live(cast(ServiceDocument, {"sender": {}, "running": True, **document}), age_s)
+
+
+def test_failing_writes_are_named_from_the_live_status_not_hung_or_died() -> None:
+    # the queue's heartbeat row is 40 s old (its volume fails); the live file is fresh
+    failing = {**WRITER_OK, "writes_failing_s": 38.0, "backlog": 1900}
+    failing["last_write_error"] = "queue /q.db: disk I/O error: read-only file system"
+    doc = report(stats(heartbeat_age=40.0), LIMITS, NOW, live(1.0, writer=failing))
+    assert doc["running"] and exit_code(doc) == 1
+    assert doc["problems"] == [
+        "queue writes have failed for 38 s: queue /q.db: disk I/O error: read-only file "
+        "system; 1900 event(s) wait in memory (at most 10000)"
+    ]
+    assert doc["storage"]["backlog"] == 1900 and doc["storage"]["writes_failing_s"] == 38.0
+
+
+def test_a_stale_live_status_is_hung_or_died_as_the_row_says() -> None:
+    doc = report(stats(heartbeat_age=40.0), LIMITS, NOW, live(30.0, writer=WRITER_OK))
+    assert not doc["running"]
+    assert doc["problems"] == ["heartbeat is 30 s old: the service hung or died"]
+
+
+def test_a_slow_disk_is_a_warning_then_a_problem_once_events_wait() -> None:
+    slow = {**WRITER_OK, "commit_s": 3.0, "commit_max_s": 3.1}
+    doc = report(stats(), LIMITS, NOW, live(1.0, writer=slow))
+    assert doc["healthy"] and doc["warnings"] == [
+        "the queue's disk is slow: a commit took 3.1 s in the last minute (an SD card or "
+        "eMMC wearing out?)"
+    ]
+    waiting = {**slow, "backlog": 400, "oldest_backlog_age_s": 7.5}
+    doc = report(stats(), LIMITS, NOW, live(1.0, writer=waiting))
+    assert doc["problems"] == [
+        "events wait 8 s in memory before they reach the disk (400 waiting; commits take "
+        "3.0 s) - the queue's disk is too slow"
+    ]
+
+
+def test_the_queue_file_state_is_a_problem_in_its_own_words() -> None:
+    gone = {"state": "folder_gone", "detail": "the queue's folder /q is gone (...)"}
+    doc = report(stats(), LIMITS, NOW, live(1.0, writer=WRITER_OK, queue_file=gone))
+    assert doc["problems"] == ["the queue's folder /q is gone (...)"]
+    assert doc["storage"]["file"] == "folder_gone"
+
+
+def test_the_accounting_adds_up_and_says_so_when_it_does_not() -> None:
+    counters = {
+        "queued_total": 100,
+        "acked_total": 60,
+        "depth": 25,
+        "drop:rejected": 5,
+        "requeued_total": 2,  # two dead letters put back: queued again
+        "drop:unwritable": 8,
+        "drop:thinned": 4,
+    }
+    a = accounting(counters, in_memory=7)
+    assert a == {
+        "built": 107,
+        "delivered": 60,
+        "exported": 0,
+        "queued": 25,
+        "dead_lettered": 3,
+        "dropped": {"unwritable": 8, "thinned": 4},
+        "in_memory": 7,
+        "balanced": True,
+    }
+    assert not accounting({**counters, "depth": 24}, in_memory=7)["balanced"]
+
+
+def test_a_running_service_s_accounting_is_read_at_its_heartbeat() -> None:
+    moment = {"queued_total": 10, "acked_total": 4, "depth": 6}
+    ledger = {"built": 12, "written": 10, "in_memory": 2, "dropped": {}}
+    doc = report(
+        stats(),  # the file's counters now: depth 0, read later than the heartbeat
+        LIMITS,
+        NOW,
+        live(1.0, writer=WRITER_OK, queue_counters=moment, ledger=ledger),
+    )
+    assert doc["accounting"]["built"] == 12 and doc["accounting"]["balanced"]
