@@ -144,8 +144,14 @@ def test_a_step_back_by_a_day_during_an_outage_stalls_nothing(
         stamps = [(parse_timestamp(e["captured_at"]), e["wall_clock"]) for e in phycloud.events()]
         ahead = [clock for at, clock in stamps if at > time.time() + 3600]
         corrected = [at for at, clock in stamps if "corrected_by_s" in clock]
+        # an event already stamped right before the step needs no repair: under load,
+        # libfaketime (reading its file at every call) once gave one read of the real
+        # clock between two of the day-ahead one (CI, 2026-11-26: 15.986 between 15.812
+        # and 16.190 corrected), as in the test from 2001 above
+        right_before = [at for at, c in stamps if "corrected_by_s" not in c and at < stepped_at]
         assert ahead == []  # none left a day in the future
-        assert len(corrected) >= before_step.queued_total
+        assert len(corrected) + len(right_before) >= before_step.queued_total
+        assert len(corrected) >= before_step.queued_total - 2, right_before
     finally:
         bridge.stop()
         phycloud.stop()
