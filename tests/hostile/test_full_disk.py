@@ -12,11 +12,12 @@ from __future__ import annotations
 import errno
 import os
 import signal
-import subprocess
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from tests.hostile.volumes import tmpfs
 from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 
 VOLUME_MB = 8
@@ -27,18 +28,9 @@ pytestmark = pytest.mark.skipif(
 
 
 @pytest.fixture
-def volume(tmp_path: Path):
-    path = tmp_path / "volume"
-    path.mkdir()
-    mounted = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", f"size={VOLUME_MB}m", "tmpfs", str(path)],
-        capture_output=True,
-        text=True,
-    )
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
-    yield path
-    subprocess.run(["umount", "-l", str(path)], check=False)
+def volume(tmp_path: Path) -> Iterator[Path]:
+    with tmpfs(tmp_path / "volume", VOLUME_MB) as path:
+        yield path
 
 
 def fill(volume: Path) -> Path:

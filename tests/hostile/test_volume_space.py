@@ -19,7 +19,6 @@ import itertools
 import os
 import signal
 import sqlite3
-import subprocess
 import time
 from collections.abc import Iterator
 from datetime import datetime
@@ -29,6 +28,7 @@ from typing import Any
 import pytest
 
 from phytrace_edge.queue.inspect import QueueStats, read_stats
+from tests.hostile.volumes import tmpfs
 from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 
 needs_root = pytest.mark.skipif(
@@ -39,17 +39,8 @@ SMALL_VOLUME_MB = 8  # with uncompressed events at 100 Hz it is full in about 20
 
 @pytest.fixture
 def small_volume(tmp_path: Path) -> Iterator[Path]:
-    path = tmp_path / "volume"
-    path.mkdir()
-    mounted = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", f"size={SMALL_VOLUME_MB}m", "tmpfs", str(path)],
-        capture_output=True,
-        text=True,
-    )
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
-    yield path
-    subprocess.run(["umount", "-l", str(path)], check=False)
+    with tmpfs(tmp_path / "volume", SMALL_VOLUME_MB) as path:
+        yield path
 
 
 def bridge_env(stub: StubProcess, queue: Path, **extra: str) -> dict[str, str]:

@@ -18,6 +18,18 @@ LIMITS = Thresholds(
 )
 
 
+WRITER_OK = {
+    "backlog": 0,
+    "backlog_max": 10_000,
+    "oldest_backlog_age_s": None,
+    "writes_failing_s": None,
+    "write_attempts_failed": 0,
+    "last_write_error": None,
+    "commit_s": 0.01,
+    "commit_max_s": 0.02,
+}
+
+
 def stats(heartbeat_age: float | None = 1.0, **document) -> QueueStats:
     service = (
         None
@@ -118,32 +130,10 @@ def test_the_status_report_has_exactly_the_declared_keys() -> None:
 def test_the_heartbeat_writes_only_declared_keys() -> None:
     options = ServiceOptions("sim", "bot", "amr", "127.0.0.1:9", 5.0, 5.0)
     ledger = {"built": 7, "written": 7, "in_memory": 0, "dropped": {}}
-    writer = {
-        "backlog": 0,
-        "backlog_max": 10,
-        "oldest_backlog_age_s": None,
-        "writes_failing_s": None,
-        "write_attempts_failed": 0,
-        "last_write_error": None,
-        "commit_s": 0.01,
-        "commit_max_s": 0.02,
-    }
-    moment = Moment(ledger, writer, {"state": "ok"}, {"queued_total": 7}, {}, NOW, True, 1.0)
+    moment = Moment(ledger, WRITER_OK, {"state": "ok"}, {"queued_total": 7}, {}, NOW, True, 1.0)
     document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW, moment)
     assert set(document) == set(get_type_hints(ServiceDocument))
     assert report(stats(**document), LIMITS, NOW)["events_built"] == 7
-
-
-WRITER_OK = {
-    "backlog": 0,
-    "backlog_max": 10_000,
-    "oldest_backlog_age_s": None,
-    "writes_failing_s": None,
-    "write_attempts_failed": 0,
-    "last_write_error": None,
-    "commit_s": 0.01,
-    "commit_max_s": 0.02,
-}
 
 
 def live(age_s: float, **document) -> Live:
