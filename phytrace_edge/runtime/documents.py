@@ -88,7 +88,6 @@ class ServiceDocument(TypedDict, total=False):
     topics: dict[str, dict[str, Any]]
     stages: dict[str, StageFigures]
     events_built: int
-    writer_dropped: int
     writer: WriterFigures
     ledger: LedgerFigures
     queue_file: QueueFileFigures

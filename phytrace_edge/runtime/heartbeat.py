@@ -44,7 +44,6 @@ class Figures:
     queue: QueueStats
     sender: SendStats
     events_built: int
-    writer_dropped: int
     topics: dict[str, dict[str, Any]]
     thread_restarts: dict[str, int]
     now: float
@@ -112,7 +111,6 @@ def service_document(
     topics: dict[str, dict[str, Any]],
     stages: dict[str, StageFigures],
     events_built: int,
-    writer_dropped: int,
     started_at: float,
     moment: Moment,
 ) -> ServiceDocument:
@@ -129,7 +127,6 @@ def service_document(
         "topics": topics,
         "stages": stages,
         "events_built": events_built,
-        "writer_dropped": writer_dropped,
     }
 
 
@@ -196,7 +193,6 @@ class Heartbeat:
             queue=queue,
             sender=self.sender.stats,
             events_built=self.outlet.events_built,
-            writer_dropped=self.outlet.writer.events_dropped,
             topics=self.topics(self._rates.rates),
             thread_restarts=dict(self.supervisor.restarts),
             now=self.store.now(),
@@ -218,7 +214,6 @@ class Heartbeat:
             self.topics(rates),
             self.stages(),
             self.outlet.events_built,
-            self.outlet.writer.events_dropped,
             self.started_at,
             self.moment(running),
         )

@@ -95,11 +95,6 @@ class QueueWriter:
         self.events_written = 0
         self.dropped: Counter[str] = Counter()
 
-    @property
-    def events_dropped(self) -> int:
-        """Events this writer could not queue, whatever the reason."""
-        return sum(self.dropped.values())
-
     def put(self, built: Built, wait: bool = False) -> None:
         """Hand an event over; never blocks on disk unless asked to ``wait`` for room
         (it then returns early only when the writer is stopping)."""

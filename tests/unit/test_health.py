@@ -131,7 +131,7 @@ def test_the_heartbeat_writes_only_declared_keys() -> None:
     options = ServiceOptions("sim", "bot", "amr", "127.0.0.1:9", 5.0, 5.0)
     ledger = {"built": 7, "written": 7, "in_memory": 0, "dropped": {}}
     moment = Moment(ledger, WRITER_OK, {"state": "ok"}, {"queued_total": 7}, {}, NOW, True, 1.0)
-    document = service_document(options, {"events_sent": 3}, {}, {}, 7, 0, NOW, moment)
+    document = service_document(options, {"events_sent": 3}, {}, {}, 7, NOW, moment)
     assert set(document) == set(get_type_hints(ServiceDocument))
     assert report(stats(**document), LIMITS, NOW)["events_built"] == 7
 
