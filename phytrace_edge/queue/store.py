@@ -14,11 +14,11 @@ Thread-safe: each use of the connection holds its lock; each thread has its comp
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import itertools
 import logging
 import sqlite3
+import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -338,7 +338,7 @@ class QueueStore:
         """Record the running service's figures for ``status`` (another process)."""
         write_service_state(self._db, document, running, self._clock(), durable)
 
-    def locked(self) -> contextlib.AbstractContextManager[object]:
+    def locked(self) -> threading.RLock:
         """The queue's lock: what is read under it is one moment of the queue (a put's
         ``after_commit`` runs under it too)."""
         return self._db.lock

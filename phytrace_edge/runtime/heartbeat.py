@@ -34,6 +34,7 @@ from phytrace_edge.ship.stats import SendStats
 log = logging.getLogger(__name__)
 
 HEARTBEAT_S = 2.0
+SNAPSHOT_WAIT_S = 0.5  # the live status never waits long for the queue
 RATE_SMOOTHING = 0.3  # weight of the newest interval in the rate averages
 
 
@@ -153,6 +154,7 @@ class Heartbeat:
         self._rates = Rates()
         self._live_failed = False
         self.last_stats: QueueStats | None = None
+        self._last_ledger: LedgerFigures | None = None  # read with last_stats
         self.last_document: ServiceDocument | None = None
 
     def topics(self, rates: Mapping[str, float]) -> dict[str, dict[str, Any]]:
@@ -219,12 +221,17 @@ class Heartbeat:
         )
 
     def moment(self, running: bool) -> Moment:
+        """The queue's counters and the ledger of one moment: now, or, when the queue
+        is busy past SNAPSHOT_WAIT_S (a commit on a slow disk) or cannot be read, the
+        last moment they were read together; the writer's figures are always now."""
         writer = self.outlet.writer
         try:
-            stats, ledger = writer.snapshot()
-            self.last_stats = stats
-        except QueueError:  # the queue cannot be read now: its last figures
-            ledger = writer.ledger()
+            snapshot = writer.snapshot(SNAPSHOT_WAIT_S)
+        except QueueError:
+            snapshot = None
+        if snapshot is not None:
+            self.last_stats, self._last_ledger = snapshot
+        ledger = self._last_ledger or writer.ledger()
         keeper = self.store.file_keeper
         return Moment(
             ledger=ledger,
@@ -247,13 +254,22 @@ class Heartbeat:
         status file, then into the queue file (which raises QueueError when the queue
         cannot be written; the live file says why). Without an fsync of its own: the
         row is news, not data (the next put's commit syncs it), and flash wears."""
+        document = self.write_live_now(running)
+        self.write_queue_row(document)
+        return document
+
+    def write_live_now(self, running: bool) -> ServiceDocument:
+        """The figures now, into the live status file only (never waits long)."""
         document = self.last_document = self.document(running)
         self.write_live(document)
-        self.store.write_service_state(document, running, durable=False)
+        return document
+
+    def write_queue_row(self, document: ServiceDocument) -> None:
+        """``document`` into the queue's heartbeat row (QueueError when it cannot)."""
+        self.store.write_service_state(document, bool(document.get("running")), durable=False)
         if document["unwritten_counts"]:  # that write took them: the live file says so
             document["unwritten_counts"] = self.store.unwritten_counts()
             self.write_live(document)
-        return document
 
     def write_live(self, document: ServiceDocument) -> None:
         if self.live_path is None:

@@ -130,15 +130,14 @@ class BridgeService:
             self.store.watch_file()
         except OSError as exc:  # the descriptor itself failed: say so, go on
             self._queue_trouble.report(f"cannot look at the queue file: {exc}")
-        document = None
+        # the live status first: it waits for nothing the disk does
+        document = self.heartbeat.write_live_now(running=True)
         try:
             self.store.record_clocks()  # a step of the wall clock is seen within a beat
-            document = self.heartbeat.write(running=True)
+            self.heartbeat.write_queue_row(document)
             stats = self.store.stats()
         except QueueError as exc:  # failing, busy or full for now: the next beat tries again
             self._queue_trouble.report(f"heartbeat not written to the queue: {exc}")
-            if document is None:
-                self.heartbeat.write_live(self.heartbeat.document(running=True))
             return
         self._queue_trouble.clear()
         try:

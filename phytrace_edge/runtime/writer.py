@@ -84,6 +84,7 @@ class QueueWriter:
         self._monotonic = monotonic
         self._pending: deque[tuple[float, Built]] = deque()  # (handed over at, event)
         self._in_hand = 0  # taken from _pending, being written
+        self._in_hand_since = 0.0  # when the first of those was handed over
         self._lock = threading.Lock()
         self._room = threading.Condition(self._lock)
         self._wake = threading.Event()
@@ -130,11 +131,18 @@ class QueueWriter:
         with self._lock:
             return self._ledger_locked()
 
-    def snapshot(self) -> tuple[QueueStats, LedgerFigures]:
+    def snapshot(self, wait_s: float = -1) -> tuple[QueueStats, LedgerFigures] | None:
         """The queue's figures and this run's ledger at one and the same moment, so
-        that built = delivered + queued + dropped + in memory holds exactly."""
-        with self.store.locked(), self._lock:  # the order a put's commit takes them
-            return self.store.stats(), self._ledger_locked()
+        that built = delivered + queued + dropped + in memory holds exactly; None when
+        the queue's lock was not free within ``wait_s`` (a commit on a slow disk)."""
+        lock = self.store.locked()
+        if not lock.acquire(timeout=wait_s):
+            return None
+        try:
+            with self._lock:  # the order a put's commit takes them
+                return self.store.stats(), self._ledger_locked()
+        finally:
+            lock.release()
 
     def _ledger_locked(self) -> LedgerFigures:
         return {
@@ -148,7 +156,10 @@ class QueueWriter:
         """How the disk is doing, for ``status`` and the metrics."""
         now = self._monotonic()
         with self._lock:
-            oldest = self._pending[0][0] if self._pending else None
+            # the group being committed waited longest: a slow commit is a wait too
+            oldest = self._in_hand_since if self._in_hand else None
+            if oldest is None and self._pending:
+                oldest = self._pending[0][0]
             backlog = len(self._pending) + self._in_hand
         failing = self._failing
         return {
@@ -184,10 +195,13 @@ class QueueWriter:
         """Put up to GROUP_MAX_EVENTS pending events; False when none were pending."""
         with self._lock:
             count = min(GROUP_MAX_EVENTS, len(self._pending))
-            group = [self._pending.popleft()[1] for _ in range(count)]
+            handed = [self._pending.popleft() for _ in range(count)]
             self._in_hand = count
-        if not group:
+            if handed:
+                self._in_hand_since = handed[0][0]
+        if not handed:
             return False
+        group = [built for _, built in handed]
         started = self._monotonic()
 
         def written() -> None:  # under the queue's lock: the ledger and the queue agree
@@ -207,7 +221,7 @@ class QueueWriter:
             )
         except QueueError as exc:  # keep them, in order, and try again
             with self._lock:
-                self._pending.extendleft(reversed([(started, b) for b in group]))
+                self._pending.extendleft(reversed(handed))  # with their hand-off times
                 self._in_hand = 0
             self._failed(exc)
             remaining = RETRY_S if self._deadline is None else self._deadline - started
