@@ -114,3 +114,19 @@ def bridge_in_process(tmp_path, stub_factory):
     yield start
     for bridge in started:
         bridge.stop()
+
+
+LOG_TAIL_LINES = 30
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]) -> Any:
+    """A failed test that ran real processes shows the end of their logs (``*.log``
+    in its tmp_path): CI prints only the report, and the cause is often there."""
+    report = yield
+    tmp_path = getattr(item, "funcargs", {}).get("tmp_path")
+    if report.failed and isinstance(tmp_path, Path) and tmp_path.is_dir():
+        for log in sorted(tmp_path.glob("*.log")):
+            lines = log.read_text(errors="replace").splitlines()[-LOG_TAIL_LINES:]
+            report.sections.append((f"last lines of {log.name}", "\n".join(lines)))
+    return report

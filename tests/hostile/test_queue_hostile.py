@@ -12,6 +12,7 @@ import stat
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -151,42 +152,56 @@ def test_a_character_device_as_queue_path_is_refused_and_left_alone(tmp_path: Pa
 
 
 @ROOT
-def test_a_new_queue_in_a_read_only_place_is_one_line(tmp_path: Path) -> None:
-    place = read_only_mount(tmp_path)
+def test_a_new_queue_in_a_read_only_place_is_one_line(
+    tmp_path: Path, read_only_mount: ReadOnlyMount
+) -> None:
+    place = read_only_mount(tmp_path / "empty")
     result = run_bridge(tmp_path, QUEUE_PATH=str(place / "queue.db"))
     assert result.returncode == 4
     assert "(Read-only file system)" in one_line(result)
 
 
 @ROOT
-def test_status_reads_a_queue_on_a_read_only_volume(tmp_path: Path) -> None:
+def test_status_reads_a_queue_on_a_read_only_volume(
+    tmp_path: Path, read_only_mount: ReadOnlyMount
+) -> None:
     source = tmp_path / "rw"
     source.mkdir()
     with QueueStore.open(source / "queue.db") as store:
         store.put_many([{"event_id": f"e{i}"} for i in range(7)])
-    place = read_only_mount(tmp_path, source)
+    place = read_only_mount(source)
     result = run_cli("status", "--json", timeout=60, QUEUE_PATH=str(place / "queue.db"))
     assert '"depth": 7' in result.stdout, result.stderr
     assert result.returncode == 3  # not running, and readable
 
 
-def read_only_mount(tmp_path: Path, source: Path | None = None) -> Path:
-    """A read-only bind mount (of ``source``, or of an empty folder), unmounted at exit."""
-    source = source or (tmp_path / "empty")
-    source.mkdir(exist_ok=True)
-    target = tmp_path / "read-only"
-    target.mkdir()
-    for command in (
-        ["mount", "--bind", str(source), str(target)],
-        ["mount", "-o", "remount,ro,bind", str(target)],
-    ):
-        done = subprocess.run(command, capture_output=True, text=True)
-        if done.returncode:
-            pytest.skip(f"cannot make a read-only mount here: {done.stderr.strip()}")
-    import atexit
+ReadOnlyMount = Callable[[Path], Path]
 
-    atexit.register(subprocess.run, ["umount", "-l", str(target)], check=False)
-    return target
+
+@pytest.fixture
+def read_only_mount(tmp_path: Path) -> Iterator[ReadOnlyMount]:
+    """Makes a read-only bind mount of a folder (created if missing); every one is
+    unmounted when the test ends, so none outlives it."""
+    mounted: list[Path] = []
+
+    def mount(source: Path) -> Path:
+        source.mkdir(exist_ok=True)
+        target = tmp_path / f"read-only-{len(mounted)}"
+        target.mkdir()
+        for command in (
+            ["mount", "--bind", str(source), str(target)],
+            ["mount", "-o", "remount,ro,bind", str(target)],
+        ):
+            done = subprocess.run(command, capture_output=True, text=True, timeout=30)
+            if command[1] == "--bind" and done.returncode == 0:
+                mounted.append(target)
+            if done.returncode:
+                pytest.skip(f"cannot make a read-only mount here: {done.stderr.strip()}")
+        return target
+
+    yield mount
+    for target in mounted:
+        subprocess.run(["umount", str(target)], check=True, timeout=30)
 
 
 def test_a_queue_from_a_newer_version_is_refused_not_used(tmp_path: Path) -> None:
