@@ -15,7 +15,9 @@ that line and exits with the error's ``exit_code``; it never prints a traceback 
     └── SendError            a batch did not reach PhyCloud this time
         └── TransientSendError   retry it: 408/425/429/5xx, timeouts, connection errors
             ├── UnexpectedAnswerError  retry it: a 2xx that is not PhyCloud's answer
-            │                          (a captive portal), so the batch is not deleted
+            │   │                      (a captive portal), so the batch is not deleted
+            │   └── UnaccountedAnswerError  PhyCloud's answer that does not account for
+            │                          every event of the batch: kept, retried, halved
             └── EndpointRefusedError  retry it, but slowly and loudly: 401/403 (key),
                                       415 (encoding), other unexpected answers (config)
 
@@ -99,6 +101,11 @@ class TransientSendError(SendError):
 
 class UnexpectedAnswerError(TransientSendError):
     """A 2xx whose body is not PhyCloud's answer: the batch was not delivered."""
+
+
+class UnaccountedAnswerError(UnexpectedAnswerError):
+    """PhyCloud's answer that does not account for every event of the batch (accepted
+    + duplicates + rejected by event_id): nothing of the batch may be deleted on it."""
 
 
 class EndpointRefusedError(TransientSendError):

@@ -8,6 +8,7 @@ repr or in JSON, percent-encoded in a URL), so a redaction filter can catch thos
 from __future__ import annotations
 
 import json
+from urllib.parse import urlsplit, urlunsplit
 
 MASK = "***"
 
@@ -62,3 +63,42 @@ def redact(text: str, forms: list[str]) -> str:
     for form in forms:
         text = text.replace(form, MASK)
     return text
+
+
+class _Known:
+    """The secrets this process holds (the API key, and every key rotated in since),
+    so that the log filter masks a key read from a file after logging was set up."""
+
+    def __init__(self) -> None:
+        self.forms: list[str] = []
+
+    def remember(self, secret: str) -> None:
+        if len(secret) < 4:  # too short to mask without masking ordinary words
+            return
+        fresh = set(leak_forms(secret)) - set(self.forms)
+        if fresh:
+            self.forms = sorted({*self.forms, *fresh}, key=len, reverse=True)
+
+
+KNOWN = _Known()
+
+
+def remember(secret: str) -> None:
+    """Mask ``secret`` (every form of it) in every log record from now on."""
+    KNOWN.remember(secret)
+
+
+def redact_url(url: str) -> str:
+    """``url`` with the credentials in it masked: ``user:***@`` (a user name alone may
+    be a token itself: ``***@``). Whatever cannot be parsed loses all before the ``@``."""
+    try:
+        parts = urlsplit(url)
+        userinfo, at, hostport = parts.netloc.rpartition("@")
+    except ValueError:
+        scheme, slashes, rest = url.rpartition("//")
+        return scheme + slashes + ("***@" + rest.rpartition("@")[2] if "@" in rest else rest)
+    if not at:
+        return url
+    user, colon, _ = userinfo.partition(":")
+    masked = f"{user}:***" if colon else "***"
+    return urlunsplit(parts._replace(netloc=f"{masked}@{hostport}"))

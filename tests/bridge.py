@@ -44,7 +44,7 @@ class InProcessBridge:
     ) -> None:
         self.settings = settings
         self.built: list[dict[str, Any]] = []  # every event built, in order
-        transport = wrap_transport(wiring.http_transport(settings)) if wrap_transport else None
+        transport = wrap_transport(wiring.http_transport(settings, {})) if wrap_transport else None
         self.service = wiring.build_service(
             settings, {}, transport=transport, on_event=self.built.append
         )

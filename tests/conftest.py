@@ -80,8 +80,8 @@ def stub_factory(tmp_path):
 
     started: list = []
 
-    def start(*args: str, name: str = "stub") -> StubProcess:
-        stub = StubProcess(tmp_path / f"{name}.db", *args).start()
+    def start(*args: str, name: str = "stub", client: Any = None) -> StubProcess:
+        stub = StubProcess(tmp_path / f"{name}.db", *args, client=client).start()
         started.append(stub)
         return stub
 

@@ -12,6 +12,7 @@ import random
 import re
 import signal
 import socket
+import ssl
 import subprocess
 import sys
 import time
@@ -54,7 +55,13 @@ def free_port() -> int:
 
 
 def python_env(**extra: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PHYCLOUD_", "QUEUE_"))}
+    """The test process's environment without the bridge's settings or a proxy of the
+    machine (tests talk to 127.0.0.1 only), plus ``extra``."""
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith(("PHYCLOUD_", "QUEUE_")) and not k.lower().endswith("_proxy")
+    }
     env.update(PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1", **extra)
     return env
 
@@ -79,8 +86,11 @@ def status_json(**env: str) -> tuple[int, dict[str, Any]]:
 class StubProcess:
     """``phytrace-edge stub`` on a free loopback port, restartable on the same port."""
 
-    def __init__(self, db: Path, *args: str) -> None:
+    def __init__(self, db: Path, *args: str, client: tuple[Path, Path] | None = None) -> None:
+        """``args`` for ``phytrace-edge stub``; ``client``: the certificate and key the
+        test itself presents to a stub that requires one (``--tls-client-ca``)."""
         self.db, self.args = db, args
+        self.verify = _test_client_context(client) if "--tls-cert" in args else True
         self.port = free_port()
         self.scheme = "https" if "--tls-cert" in args else "http"
         self.process: subprocess.Popen[str] | None = None
@@ -123,7 +133,9 @@ class StubProcess:
 
     def _healthy(self) -> bool:
         try:
-            return httpx.get(f"{self.url}/healthz", timeout=1, verify=False).status_code == 200
+            return (
+                httpx.get(f"{self.url}/healthz", timeout=1, verify=self.verify).status_code == 200
+            )
         except httpx.HTTPError:
             return False
 
@@ -142,7 +154,7 @@ class StubProcess:
                 self.kill()
 
     def stats(self) -> dict[str, Any]:
-        return httpx.get(f"{self.endpoint}/stats", timeout=5).json()
+        return httpx.get(f"{self.endpoint}/stats", timeout=5, verify=self.verify).json()
 
     def events(self) -> list[dict[str, Any]]:
         """Every event the stub stored, in the order it stored them."""
@@ -150,7 +162,10 @@ class StubProcess:
         after = 0
         while True:
             page = httpx.get(
-                f"{self.endpoint}/events", params={"after": after, "limit": 10000}, timeout=30
+                f"{self.endpoint}/events",
+                params={"after": after, "limit": 10000},
+                timeout=30,
+                verify=self.verify,
             ).json()
             events += page["events"]
             if not page["events"]:
@@ -161,21 +176,43 @@ class StubProcess:
         return [event["event_id"] for event in self.events()]
 
     def set_faults(self, **faults: Any) -> dict[str, Any]:
-        return httpx.put(f"{self.endpoint}/faults", json=faults, timeout=5).json()
+        return httpx.put(
+            f"{self.endpoint}/faults", json=faults, timeout=5, verify=self.verify
+        ).json()
+
+
+def _test_client_context(client: tuple[Path, Path] | None) -> ssl.SSLContext:
+    """How the test talks to a TLS stub: no verification of the stub (the bridge's
+    verification is what is tested), its own client certificate when one is needed."""
+    context = ssl.create_default_context()
+    context.check_hostname = False
+    context.verify_mode = ssl.CERT_NONE
+    if client is not None:
+        context.load_cert_chain(*client)
+    return context
 
 
 class BridgeProcess:
     """``phytrace-edge run`` with settings from the environment."""
 
-    def __init__(self, log: Path, *, preexec: Callable[[], None] | None = None, **env: str) -> None:
-        """``preexec`` runs in the child before exec (a namespace to enter)."""
+    def __init__(
+        self,
+        log: Path,
+        *,
+        preexec: Callable[[], None] | None = None,
+        command: list[str] | None = None,
+        **env: str,
+    ) -> None:
+        """``preexec`` runs in the child before exec (a namespace to enter); ``command``
+        replaces ``python -m phytrace_edge run`` (a wrapper that ends in it)."""
         self.env, self.log, self.preexec = env, log, preexec
+        self.command = command or [sys.executable, "-m", "phytrace_edge", "run"]
         self.process: subprocess.Popen[bytes] | None = None
 
     def start(self) -> BridgeProcess:
         with self.log.open("a") as log:
             self.process = subprocess.Popen(
-                [sys.executable, "-m", "phytrace_edge", "run"],
+                self.command,
                 stdout=log,
                 stderr=log,
                 env=python_env(**self.env),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -92,6 +93,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             from phytrace_edge.runtime.options import configure_logging
 
             configure_logging(loaded.settings, os.environ)
+        for warning in loaded.warnings:
+            if args.logs:
+                logging.getLogger("phytrace_edge").warning(warning)
+            else:
+                sys.stderr.write(f"phytrace-edge: warning: {warning}\n")
         code: int = args.handler(args, loaded)
         sys.stdout.flush()  # here, so that a reader gone away is handled below
         return code

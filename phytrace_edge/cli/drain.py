@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
@@ -27,7 +28,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     from phytrace_edge.runtime import wiring
 
     started = time.monotonic()
-    with wiring.shipping(loaded.settings) as parts:
+    with wiring.shipping(loaded.settings, os.environ) as parts:
         store, sender = parts.store, parts.sender
         stop_on_signals(sender.stop)
         depth = store.counter("depth")

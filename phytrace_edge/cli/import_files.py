@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     complete = True
     with (
         tempfile.TemporaryDirectory(prefix="import-", dir=state_dir) as staging,
-        wiring.staging(loaded.settings, Path(staging) / "queue.db") as parts,
+        wiring.staging(loaded.settings, os.environ, Path(staging) / "queue.db") as parts,
     ):
         stop_on_signals(parts.sender.stop)
         for file in args.files:

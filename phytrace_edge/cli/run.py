@@ -8,6 +8,7 @@ import os
 import signal
 import threading
 import time
+from collections.abc import Callable
 
 from phytrace_edge.cli.signals import on_signals
 from phytrace_edge.config import LoadedSettings
@@ -49,8 +50,17 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
         log.info("received %s: stopping (again to exit at once)", signal.Signals(signum).name)
         stop.set()
 
-    on_signals(on_signal)
+    on_hangup: list[Callable[[], None]] = []  # the service's, once it is built
+
+    def hangup() -> None:
+        if on_hangup:
+            on_hangup[0]()
+        else:
+            log.warning("SIGHUP during start-up: ignored")
+
+    on_signals(on_signal, hangup)
     service = wiring.build_service(loaded.settings, os.environ, args.ros_args)
+    on_hangup.append(lambda: wiring.read_api_key_again(service))
     watchdog.serve(service, SystemdNotifier(os.environ), stop)
     if service.supervisor.failed.is_set():
         raise StageFailedError(f"{service.supervisor.failure} - exiting so it is restarted")

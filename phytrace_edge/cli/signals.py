@@ -1,13 +1,18 @@
 """SIGINT and SIGTERM for the commands that run until stopped (``run``, ``drain``,
-``import``), handled outside the signal handler itself."""
+``import``), and SIGHUP, handled outside the signal handler itself. SIGHUP's default
+would end the process without a word; here it re-reads the API key (``run``) or is
+ignored with a log line."""
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import threading
 from collections.abc import Callable
 from typing import Any
+
+log = logging.getLogger("phytrace_edge")
 
 
 def stop_on_signals(stop: Any) -> None:
@@ -16,8 +21,15 @@ def stop_on_signals(stop: Any) -> None:
     on_signals(lambda signum: stop.set())
 
 
-def on_signals(callback: Callable[[int], None]) -> None:
-    """Call ``callback(signum)`` for SIGINT and SIGTERM, in a thread of its own. A
+def ignore_hangup() -> None:
+    log.warning("SIGHUP: ignored (it only re-reads the API key of a running service)")
+
+
+def on_signals(
+    callback: Callable[[int], None], on_hangup: Callable[[], None] = ignore_hangup
+) -> None:
+    """Call ``callback(signum)`` for SIGINT and SIGTERM, ``on_hangup()`` for SIGHUP,
+    in a thread of its own. A
     Python signal handler runs between two bytecodes of the main thread: setting an
     Event there hangs for good when the main thread was inside that Event's ``wait``
     and held its lock (a SIGTERM that never stopped the service, seen in a test). So
@@ -26,7 +38,7 @@ def on_signals(callback: Callable[[int], None]) -> None:
     read_end, write_end = os.pipe()
     os.set_blocking(write_end, False)
     signal.set_wakeup_fd(write_end)
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, lambda signum, frame: None)
 
     def watch() -> None:
@@ -34,5 +46,7 @@ def on_signals(callback: Callable[[int], None]) -> None:
             for signum in os.read(read_end, 64):
                 if signum in (signal.SIGINT, signal.SIGTERM):
                     callback(signum)
+                elif signum == signal.SIGHUP:
+                    on_hangup()
 
     threading.Thread(target=watch, name="phytrace-signals", daemon=True).start()

@@ -12,7 +12,12 @@ from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, QueueError
 from phytrace_edge.queue.inspect import QueueStats, read_stats
 from phytrace_edge.runtime import live_status
-from phytrace_edge.runtime.documents import ClockSection, ServiceDocument, StatusReport
+from phytrace_edge.runtime.documents import (
+    ClockSection,
+    LinkSection,
+    ServiceDocument,
+    StatusReport,
+)
 from phytrace_edge.runtime.health import Live, Thresholds, exit_code, report, thresholds
 from phytrace_edge.units import format_bytes
 
@@ -105,10 +110,15 @@ def render_status(d: StatusReport) -> str:
         f"of {format_bytes(queue['effective_cap_bytes'])} ({queue['cap_limited_by']} limit, "
         f"{queue['fill']:.0%}; files {format_bytes(queue['bytes'])}){oldest}  {queue['path']}"
     )
+    unexpected = d["unexpected_answers"]
     lines.append(
         f"  sent         {d['sent_total']} in total, {d['send_rate_eps']:.1f} events/s, last "
         f"success {d['last_success_at'] or 'never'}"
+        # answers on which nothing was deleted: a captive portal, or PhyCloud miscounting
+        + (f"; {unexpected} unexpected answer(s), batches kept" if unexpected else "")
     )
+    if (link := render_link(d["link"])) is not None:
+        lines.append(f"  link         {link}")
     if d["exported_total"]:
         lines.append(f"  exported     {d['exported_total']} in hand-carry files (export)")
     lanes = d["lanes"]
@@ -156,6 +166,20 @@ def render_status(d: StatusReport) -> str:
     lines += [f"  warning: {warning}" for warning in d["warnings"]]
     lines += [f"  problem: {problem}" for problem in d["problems"]]
     return "\n".join(lines)
+
+
+def render_link(link: LinkSection) -> str | None:
+    """The way to PhyCloud when it is not the plain one: a proxy, a client certificate."""
+    parts = []
+    if link.get("proxy"):
+        parts.append(f"through proxy {link['proxy']}")
+    if link.get("client_cert"):
+        left = link.get("client_cert_expires_in_s")
+        days = "" if left is None else f", expires in {left / 86400:.0f} days"
+        parts.append(f"client certificate {link['client_cert']}{days}")
+    if link.get("api_key_from", "PHYCLOUD_API_KEY") != "PHYCLOUD_API_KEY":
+        parts.append(f"key from {link['api_key_from']}")
+    return "; ".join(parts) or None
 
 
 def render_clock(clock: ClockSection) -> str | None:

@@ -88,6 +88,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--tls-key", type=checked(path_value, "path"), help="the certificate's private key (PEM)"
     )
+    parser.add_argument(
+        "--tls-client-ca",
+        type=checked(path_value, "path"),
+        help="require client certificates signed by this CA (PEM): mutual TLS",
+    )
 
 
 def host(raw: str) -> str:
@@ -127,9 +132,13 @@ def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
         raise ConfigError(str(exc)) from None
     if bool(args.tls_cert) != bool(args.tls_key):
         raise ConfigError("--tls-cert and --tls-key go together")
+    if args.tls_client_ca and not args.tls_cert:
+        raise ConfigError("--tls-client-ca needs --tls-cert and --tls-key")
     tls = (args.tls_cert, args.tls_key) if args.tls_cert else None
     try:
-        run_stub(args.host, args.port, args.db, args.api_key, faults, args.seed, tls)
+        run_stub(
+            args.host, args.port, args.db, args.api_key, faults, args.seed, tls, args.tls_client_ca
+        )
     except OSError as exc:  # the address is taken, not ours, or the certificate unreadable
         raise ConfigError(f"stub on {args.host}:{args.port}: {exc.strerror or exc}") from None
     return EXIT_OK

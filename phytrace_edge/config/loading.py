@@ -15,6 +15,7 @@ from typing import Any, NamedTuple
 
 from phytrace_edge.config.settings import Setting, Settings, setting_infos
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.redact import redact_url
 from phytrace_edge.units import format_bytes
 
 CONFIG_FILE_MAX_BYTES = 1024 * 1024
@@ -26,12 +27,15 @@ class LoadedSettings(NamedTuple):
 
     settings: Settings
     origins: dict[str, str]
+    warnings: tuple[str, ...] = ()  # for the log, once it is set up
 
 
 def _shown(info: Setting, raw: Any) -> str:
     """A value as an error message quotes it: the API key never, and nothing long."""
     if info.key == "phycloud_api_key":
         return "'***'"
+    if isinstance(raw, str) and "@" in raw:  # a URL's user:password, scheme or not
+        raw = redact_url(raw) if "://" in raw else redact_url("//" + raw)[2:]
     text = ascii(raw)
     return text if len(text) <= SHOWN_MAX_CHARS else text[:SHOWN_MAX_CHARS] + "...'"
 
@@ -188,4 +192,21 @@ def settings_from_environment(
         env = {**read_env_file(env_file), **env}
     path = config_path or env.get("PHYTRACE_CONFIG") or None
     file_values = read_config_file(path) if path else {}
-    return load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")
+    loaded = load_settings(flags, env, file_values, ros_params, file_label=f"config file {path}")
+    if path and file_values.get("phycloud_api_key"):
+        return loaded._replace(warnings=_readable_by_others(path))
+    return loaded
+
+
+def _readable_by_others(path: str) -> tuple[str, ...]:
+    """A warning when the config file holding the API key is readable by other users."""
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        return ()
+    if not mode & 0o044:
+        return ()
+    return (
+        f"config file {path} holds the API key and is readable by other users (mode "
+        f"{mode:04o}): chmod 600 {path}, or move the key to PHYCLOUD_API_KEY_FILE",
+    )

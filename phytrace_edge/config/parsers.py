@@ -221,6 +221,25 @@ def ca_file(raw: Any) -> str:
     return path
 
 
+def proxy_url(raw: Any) -> str:
+    """``direct`` (no proxy, whatever the environment says), or an http(s) proxy URL;
+    ``host:port`` means ``http://host:port``."""
+    allowed = "a proxy URL like http://proxy.example.com:3128, or direct"
+    value = _text_or(raw, allowed).strip()
+    if value.lower() == "direct":
+        return "direct"
+    if "://" not in value:
+        value = f"http://{value}"
+    try:
+        parts = urlsplit(value)
+        parts.port  # noqa: B018 - a port that is not a number raises here
+    except ValueError:
+        raise ValueError(allowed) from None
+    if parts.scheme not in ("http", "https") or not _valid_host(parts.hostname or ""):
+        raise ValueError(allowed)
+    return value
+
+
 def path_value(raw: Any) -> str:
     allowed = "a file path"
     value = _text_or(raw, allowed)

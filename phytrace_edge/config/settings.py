@@ -40,6 +40,7 @@ from phytrace_edge.config.parsers import (
     optional,
     path_value,
     positive_float,
+    proxy_url,
     secret,
     topic_qos,
     topic_remap,
@@ -108,6 +109,14 @@ class Settings:
         ship.DEFAULT_ENDPOINT, http_url, "PhyCloud ingestion API base URL"
     )
     phycloud_api_key: Secret = setting(Secret(""), secret, "API key sent as a Bearer token")
+    phycloud_api_key_file: str | None = setting(
+        None, optional(path_value), "file holding the API key (re-read on a 401 and SIGHUP)"
+    )
+    phycloud_proxy: str | None = setting(
+        None,
+        optional(proxy_url),
+        "proxy for PhyCloud (or direct); default: HTTPS_PROXY etc. from the environment",
+    )
     source_id: str = setting("delivery-robot-001", identifier, "unique robot id", "ROBOT_ID")
     source_type: str = setting("delivery_robot", one_of(*SOURCE_TYPES), "robot class", "ROBOT_TYPE")
     fleet_id: str | None = setting(None, optional(identifier), "fleet grouping id")
@@ -179,7 +188,18 @@ class Settings:
     shutdown_grace_s: float = setting(
         DEFAULT_SHUTDOWN_GRACE_S, positive_float(600), "time to flush at SIGTERM"
     )
-    ca_bundle: str | None = setting(None, optional(ca_file), "extra CA file for TLS")
+    ca_bundle: str | None = setting(
+        None, optional(ca_file), "CA file trusted in addition to the system's store"
+    )
+    client_cert: str | None = setting(
+        None, optional(path_value), "client certificate (PEM) for mutual TLS"
+    )
+    client_key: str | None = setting(
+        None, optional(path_value), "its private key (PEM); default: in CLIENT_CERT's file"
+    )
+    client_key_password_file: str | None = setting(
+        None, optional(path_value), "file holding CLIENT_KEY's passphrase, if encrypted"
+    )
     upload_max_bps: int | None = setting(
         None, optional(int_between(1, 10**12)), "upload bandwidth cap, bytes/s"
     )

@@ -29,6 +29,8 @@ class SenderFigures(TypedDict, total=False):
     last_error_class: str | None
     last_error_at: float | None
     last_status: int | None
+    last_refusal: str | None
+    last_refusal_at: float | None
     live_events_sent: int
     backfill_events_sent: int
     newest_delivered_at: float | None
@@ -36,6 +38,17 @@ class SenderFigures(TypedDict, total=False):
     last_queue_error: str | None
     last_queue_error_at: float | None
     send_rate_eps: float
+
+
+class LinkFigures(TypedDict, total=False):
+    """How the bridge reaches PhyCloud (``HttpTransport.figures``): never a secret."""
+
+    endpoint: str  # credentials in the URL masked
+    proxy: str | None  # the proxy in use, its password masked; None: direct
+    trust: str  # the trust store, and CA_BUNDLE when set
+    client_cert: str | None
+    client_cert_expires_at: float | None  # Unix seconds
+    api_key_from: str  # the setting or file the key comes from
 
 
 class StageFigures(TypedDict, total=False):
@@ -85,6 +98,7 @@ class ServiceDocument(TypedDict, total=False):
     source_id: str
     endpoint_host: str
     sender: SenderFigures
+    link: LinkFigures
     topics: dict[str, dict[str, Any]]
     stages: dict[str, StageFigures]
     events_built: int
@@ -153,6 +167,10 @@ class StorageSection(TypedDict):
     file_detail: str | None
 
 
+class LinkSection(LinkFigures, total=False):
+    client_cert_expires_in_s: float | None  # by this machine's wall clock
+
+
 class StatusReport(TypedDict):
     healthy: bool
     running: bool
@@ -161,6 +179,7 @@ class StatusReport(TypedDict):
     heartbeat_age_s: float | None
     service: dict[str, Any]  # pid, version, input, source_id, endpoint_host, started_at
     queue: QueueSection
+    link: LinkSection
     lanes: Lanes
     resolution: list[dict[str, Any]]
     drops: dict[str, int]
@@ -176,6 +195,7 @@ class StatusReport(TypedDict):
     retries: int
     batches_split: int
     auth_failures: int
+    unexpected_answers: int  # 2xx not PhyCloud's answer, or not accounting for the batch
     queue_errors: int
     events_built: int
     thread_restarts: dict[str, int]

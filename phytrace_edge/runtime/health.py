@@ -20,6 +20,8 @@ from phytrace_edge.queue.volume import LIMIT_VOLUME
 from phytrace_edge.runtime.documents import (
     Accounting,
     Lanes,
+    LinkFigures,
+    LinkSection,
     QueueFileFigures,
     SenderFigures,
     ServiceDocument,
@@ -106,12 +108,10 @@ def report(
         problems += _stage_problems(stages, limits.health_stale_s)
         problems += _storage_problems(writer, queue_file)
         warnings += _storage_warnings(writer)
-    if sender.get("last_status") in (401, 403) and (sender.get("last_error_at") or 0) > (
-        last_success or 0
-    ):
-        problems.append(
-            f"PhyCloud refuses the API key (HTTP {sender['last_status']}) - check PHYCLOUD_API_KEY"
-        )
+    link: LinkFigures = service.get("link", {})
+    wall_now = now + stats.clock.wall_offset
+    problems += _link_problems(sender, link, last_success)
+    warnings += _link_warnings(sender, link, last_success, now, wall_now) if running else []
     queue_error_at = sender.get("last_queue_error_at") or 0
     if (
         running
@@ -175,6 +175,7 @@ def report(
             "quarantined": stats.quarantined,
             "damaged": stats.damaged,
         },
+        "link": _link(link, wall_now),
         "lanes": _lanes(sender, oldest_age, now),
         "resolution": list(stats.resolution),
         "drops": {k[5:]: v for k, v in counters.items() if k.startswith("drop:") and v},
@@ -190,6 +191,7 @@ def report(
         "retries": sender.get("retries", 0),
         "batches_split": sender.get("batches_split", 0),
         "auth_failures": sender.get("auth_failures", 0),
+        "unexpected_answers": sender.get("unexpected_answers", 0),
         "queue_errors": sender.get("queue_errors", 0),
         "events_built": service.get("events_built", 0),
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
@@ -203,6 +205,62 @@ def report(
         "accounting": accounting(counters, in_memory),
         "storage": _storage(writer, queue_file),
     }
+
+
+UNREACHABLE_SHOWN_S = 60.0  # a send error this recent is shown as the cause
+CERT_WARNING_S = 14 * 86400.0  # as ship/tls.EXPIRY_WARNING_S (not imported: start-up path)
+
+
+def _link_problems(
+    sender: SenderFigures, link: LinkFigures, last_success: float | None
+) -> list[str]:
+    """What only the operator can fix on the way to PhyCloud: a refused key, TLS that
+    does not verify, a client certificate or a proxy's credentials refused."""
+    refused_at = sender.get("last_refusal_at") or 0
+    if refused_at <= (last_success or 0):
+        return []
+    if sender.get("last_status") in (401, 403):
+        where = link.get("api_key_from", "PHYCLOUD_API_KEY")
+        return [f"PhyCloud refuses the API key (HTTP {sender['last_status']}) - check {where}"]
+    return [str(sender.get("last_refusal"))]
+
+
+def _link_warnings(
+    sender: SenderFigures,
+    link: LinkFigures,
+    last_success: float | None,
+    now: float,
+    wall_now: float,
+) -> list[str]:
+    """The cause of a send failing now (PhyCloud unreachable, through which proxy),
+    shown at once; and a client certificate about to expire."""
+    warnings = []
+    error_at = sender.get("last_error_at") or 0
+    refused_at = sender.get("last_refusal_at") or 0
+    recent = now - error_at < UNREACHABLE_SHOWN_S
+    if recent and error_at > (last_success or 0) and error_at > refused_at:
+        warnings.append(f"sending fails: {sender.get('last_error')}")
+    expires_at = link.get("client_cert_expires_at")
+    if expires_at is not None and 0 < expires_at - wall_now < CERT_WARNING_S:
+        days = (expires_at - wall_now) / 86400
+        warnings.append(
+            f"CLIENT_CERT {link.get('client_cert')} expires in {days:.1f} days "
+            f"({format_timestamp(expires_at)}): renew it"
+        )
+    elif expires_at is not None and expires_at <= wall_now:
+        warnings.append(
+            f"CLIENT_CERT {link.get('client_cert')} expired on {format_timestamp(expires_at)} "
+            "(by this robot's clock): renew it"
+        )
+    return warnings
+
+
+def _link(link: LinkFigures, wall_now: float) -> LinkSection:
+    section = cast(LinkSection, dict(link))
+    expires_at = link.get("client_cert_expires_at")
+    if expires_at is not None:
+        section["client_cert_expires_in_s"] = round(expires_at - wall_now)
+    return section
 
 
 def accounting(counters: dict[str, int], in_memory: int) -> Accounting:

@@ -18,6 +18,7 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status
 from phytrace_edge.runtime.documents import (
     LedgerFigures,
+    LinkFigures,
     QueueFileFigures,
     SenderFigures,
     ServiceDocument,
@@ -125,6 +126,7 @@ def service_document(
         "source_id": options.source_id,
         "endpoint_host": options.endpoint_host,
         "sender": sender,
+        "link": cast(LinkFigures, dict(options.link)),
         "topics": topics,
         "stages": stages,
         "events_built": events_built,

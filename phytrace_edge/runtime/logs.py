@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from phytrace_edge.redact import leak_forms, redact
+from phytrace_edge.redact import KNOWN, redact, remember
 from phytrace_edge.udm.event import format_timestamp
 
 TEXT_FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
@@ -76,19 +76,20 @@ class RedactSecrets(logging.Filter):
 
     def __init__(self, secrets: Iterable[str]) -> None:
         super().__init__()
-        forms = {form for s in secrets if len(s) >= 4 for form in leak_forms(s)}
-        self._forms = sorted(forms, key=len, reverse=True)
+        for secret in secrets:
+            remember(secret)  # with the keys read later (a key file, a rotation)
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if not self._forms:
+        forms = KNOWN.forms
+        if not forms:
             return True
         message = record.getMessage()
-        masked = redact(message, self._forms)
+        masked = redact(message, forms)
         if masked != message:
             record.msg, record.args = masked, None
         if record.exc_info:
             text = logging.Formatter().formatException(record.exc_info)
-            record.exc_text = redact(text, self._forms)
+            record.exc_text = redact(text, forms)
         return True
 
 

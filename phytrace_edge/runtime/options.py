@@ -8,8 +8,9 @@ It imports only the options of the stages, never the stages themselves.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -20,10 +21,16 @@ from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.sources.base import SourceOptions
 from phytrace_edge.ingest.sources.dds_env import domain_settings
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.redact import redact_url
 from phytrace_edge.runtime import health
 from phytrace_edge.runtime.health import Thresholds
 from phytrace_edge.runtime.logs import configure_logging as configure_logs
+from phytrace_edge.ship.api_key import CREDENTIAL_NAME, ApiKey, readable_by_others
 from phytrace_edge.ship.options import SendPolicy, claim_lease_s
+from phytrace_edge.ship.proxy import proxy_for
+from phytrace_edge.ship.tls import ClientCertificate, TlsOptions
+
+log = logging.getLogger(__name__)
 
 MIN_STALL_S = 30.0
 
@@ -43,6 +50,7 @@ class ServiceOptions:
     metrics_port: int = 0
     health_event_interval_s: float = 0.0  # 0: no bridge.health events
     thresholds: Thresholds | None = None  # what the health events judge by
+    link: Mapping[str, Any] = field(default_factory=dict)  # HttpTransport.figures()
 
 
 @dataclass(frozen=True)
@@ -159,12 +167,60 @@ def send_policy(s: Settings) -> SendPolicy:
     )
 
 
+@dataclass(frozen=True)
+class LinkOptions:
+    """How the bridge reaches PhyCloud: PHYCLOUD_ENDPOINT, HTTP_TIMEOUT_S, the proxy
+    (PHYCLOUD_PROXY or the environment's) and TLS (CA_BUNDLE, CLIENT_CERT...)."""
+
+    endpoint: str
+    timeout_s: float
+    proxy: str | None
+    tls: TlsOptions
+
+
+def link_options(s: Settings, env: Mapping[str, str]) -> LinkOptions:
+    client = (
+        ClientCertificate(s.client_cert, s.client_key, s.client_key_password_file)
+        if s.client_cert
+        else None
+    )
+    if client is None and (s.client_key or s.client_key_password_file):
+        raise ConfigError("CLIENT_KEY and CLIENT_KEY_PASSWORD_FILE need CLIENT_CERT")
+    return LinkOptions(
+        s.phycloud_endpoint,
+        s.http_timeout_s,
+        proxy_for(s.phycloud_endpoint, env, s.phycloud_proxy),
+        TlsOptions(s.ca_bundle, client),
+    )
+
+
+def api_key(s: Settings, env: Mapping[str, str]) -> ApiKey:
+    """The API key: PHYCLOUD_API_KEY, or the file PHYCLOUD_API_KEY_FILE names, or
+    systemd's credential ``phycloud_api_key`` (``LoadCredential=``) when neither is
+    set. A file readable by other users gets a warning."""
+    if s.phycloud_api_key and s.phycloud_api_key_file:
+        raise ConfigError("PHYCLOUD_API_KEY and PHYCLOUD_API_KEY_FILE are both set: keep one")
+    if s.phycloud_api_key_file:
+        key = ApiKey.from_file(s.phycloud_api_key_file, "PHYCLOUD_API_KEY_FILE")
+    elif not s.phycloud_api_key and env.get("CREDENTIALS_DIRECTORY"):
+        credential = Path(env["CREDENTIALS_DIRECTORY"].split(":")[0]) / CREDENTIAL_NAME
+        if not credential.exists():
+            return ApiKey(s.phycloud_api_key)
+        key = ApiKey.from_file(str(credential), f"systemd credential {CREDENTIAL_NAME}")
+    else:
+        return ApiKey(s.phycloud_api_key)
+    warning = readable_by_others(str(key.path))
+    if warning:
+        log.warning(warning)
+    return key
+
+
 def service_options(s: Settings) -> ServiceOptions:
     return ServiceOptions(
         input_label=s.bridge_input,
         source_id=s.source_id,
         source_type=s.source_type,
-        endpoint_host=urlsplit(s.phycloud_endpoint).netloc,
+        endpoint_host=urlsplit(redact_url(s.phycloud_endpoint)).netloc,
         sample_rate_hz=s.sample_rate_hz,
         shutdown_grace_s=s.shutdown_grace_s,
         stall_after_s=max(MIN_STALL_S, 3 * s.http_timeout_s),

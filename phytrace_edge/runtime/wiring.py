@@ -94,8 +94,17 @@ def open_queue(s: Settings) -> QueueStore:
     )
 
 
-def http_transport(s: Settings) -> HttpTransport:
-    return HttpTransport(s.phycloud_endpoint, s.phycloud_api_key, s.http_timeout_s, s.ca_bundle)
+def http_transport(s: Settings, env: Mapping[str, str]) -> HttpTransport:
+    """The transport to PhyCloud as the settings and ``env`` (the process environment:
+    proxies, systemd credentials) say."""
+    link = options.link_options(s, env)
+    return HttpTransport(
+        link.endpoint,
+        options.api_key(s, env),
+        link.timeout_s,
+        tls_options=link.tls,
+        proxy=link.proxy,
+    )
 
 
 @dataclass(frozen=True)
@@ -107,27 +116,29 @@ class Shipping:
 
 
 @contextmanager
-def shipping(s: Settings) -> Iterator[Shipping]:
+def shipping(s: Settings, env: Mapping[str, str]) -> Iterator[Shipping]:
     """The robot's queue and its sender, as ``run`` would send it (``drain``)."""
-    with open_queue(s) as store, _sending(s, store, options.send_policy(s)) as parts:
+    with open_queue(s) as store, _sending(s, env, store, options.send_policy(s)) as parts:
         yield parts
 
 
 @contextmanager
-def staging(s: Settings, path: Path) -> Iterator[Shipping]:
+def staging(s: Settings, env: Mapping[str, str], path: Path) -> Iterator[Shipping]:
     """A staging queue at ``path`` and a sender that sends it strictly oldest first
     (``import``: the staging queue only feeds the sender)."""
     policy = dataclasses.replace(options.send_policy(s), live_share=0.0)
     with (
         QueueStore.open(path, limits=STAGING_LIMITS, lease_s=STAGING_LEASE_S) as store,
-        _sending(s, store, policy) as parts,
+        _sending(s, env, store, policy) as parts,
     ):
         yield parts
 
 
 @contextmanager
-def _sending(s: Settings, store: QueueStore, policy: SendPolicy) -> Iterator[Shipping]:
-    sender = Sender(store, http_transport(s), policy)
+def _sending(
+    s: Settings, env: Mapping[str, str], store: QueueStore, policy: SendPolicy
+) -> Iterator[Shipping]:
+    sender = Sender(store, http_transport(s, env), policy)
     try:
         yield Shipping(store, sender)
     finally:
@@ -156,7 +167,9 @@ def build_service(
     try:
         carry_over_unwritten_counts(store, str(path), env)
         live_path = live_status.writable_path(str(path), env)
-        service = _service(s, source, store, transport or http_transport(s), on_event, live_path)
+        service = _service(
+            s, source, store, transport or http_transport(s, env), on_event, live_path
+        )
     except BaseException:
         store.close()
         lock.release()
@@ -165,6 +178,15 @@ def build_service(
     prepare_validator()  # its one-off peak now, then handed back
     give_back_free_memory()
     return service
+
+
+def read_api_key_again(service: BridgeService) -> None:
+    """SIGHUP: the key file read again (or a line saying why it cannot be)."""
+    transport = service.sender.transport
+    if isinstance(transport, HttpTransport):
+        log.warning(transport.api_key.reload_on_hangup())
+    else:
+        log.warning("SIGHUP: ignored (no HTTP transport)")
 
 
 def refuse_a_queue_that_went_missing(path: str, env: Mapping[str, str]) -> None:
@@ -206,7 +228,8 @@ def _service(
     on_event: Callable[[dict[str, Any]], None] | None,
     live_path: str | None,
 ) -> BridgeService:
-    service_options = options.service_options(s)
+    link = transport.figures() if isinstance(transport, HttpTransport) else {}
+    service_options = dataclasses.replace(options.service_options(s), link=link)
     started_at = store.now()
     sender = Sender(store, transport, options.send_policy(s))
     outlet = Outlet(QueueWriter(store), wait_for_disk=source.keeps_time, on_event=on_event)

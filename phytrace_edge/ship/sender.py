@@ -4,15 +4,19 @@ Each batch is claimed under a lease, sent, and acked when PhyCloud has it. Failu
 are retried with tenacity until they succeed or the sender is stopped; only PhyCloud
 refusing an event as bad data dead-letters it:
 
-- 2xx: ack; events PhyCloud refused individually go to dead letters.
+- 2xx that accounts for every event (``responses.account``): ack; events PhyCloud
+  refused individually go to dead letters.
+- 2xx that does not: nothing acked or dead-lettered; retry with backoff. After
+  UNACCOUNTED_BEFORE_SPLIT in a row, halve the batch and send the parts, down to single
+  events; a single event is kept and retried every RETRY_MAX_S until it adds up.
 - 400/422: split the batch (at the index PhyCloud blamed, else in halves) and send
   the parts, recursively, until the offending events are alone; dead-letter those.
 - 413: split likewise; a single event still too large is dead-lettered.
-- 408/425/429/5xx, timeouts, connection errors: retry, exponential backoff with full
-  jitter between RETRY_MIN_S and RETRY_MAX_S, or Retry-After when the server says.
-- 401/403/415 and unexpected answers: keep the data, retry at RETRY_MAX_S, log ERROR.
+- 408/425/429/5xx, timeouts, connection errors, a 2xx without PhyCloud's answer (a
+  captive portal): retry with backoff, or Retry-After when the server says.
+- 401/403/415 and other statuses: keep the data, retry at RETRY_MAX_S, log ERROR.
 
-Full jitter spreads a fleet's retries after an outage (docs/phycloud-api.md).
+How long and how loudly: ``retries``.
 
 Batches are pipelined (docs/phycloud-api.md, "Batches"): the sender's thread claims
 and encodes the next batch while up to REQUESTS_IN_FLIGHT requests are on the wire,
@@ -35,26 +39,22 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from tenacity import RetryCallState, Retrying, retry_if_exception_type, wait_random_exponential
+from tenacity import RetryCallState, Retrying, retry_if_exception_type
 
-from phytrace_edge.errors import (
-    EndpointRefusedError,
-    QueueError,
-    TransientSendError,
-)
+from phytrace_edge.errors import QueueError, TransientSendError, UnaccountedAnswerError
 from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.lanes import Lanes
 from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.request import BodyEncoder, Prepared, events_body, request_headers
-from phytrace_edge.ship.responses import Accepted, Refused, classify, split_refused
+from phytrace_edge.ship.responses import Accepted, Outcome, classify, split_refused
+from phytrace_edge.ship.retries import UNACCOUNTED_BEFORE_SPLIT, Backoff, say_halving, say_retrying
 from phytrace_edge.ship.stats import SendStats
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import Transport
 
 log = logging.getLogger(__name__)
 
-RETRY_AFTER_JITTER = 0.2  # up to 20% later than asked, so a fleet told the same time spreads
 POLL_INTERVAL_S = 0.25
 QUEUE_RETRY_S = 1.0
 BEAT_S = 1.0
@@ -100,10 +100,7 @@ class Sender:
         self._throttle = Throttle(policy.upload_max_bps, self._sleep)
         self._encoders = threading.local()  # python-zstandard: one compressor per thread
         self._lanes = Lanes(policy.live_share, store.now())
-        # full jitter between RETRY_MIN_S and the exponential bound (never a tight loop)
-        self._backoff = wait_random_exponential(
-            multiplier=policy.retry_min_s, max=policy.retry_max_s, min=policy.retry_min_s
-        )
+        self._backoff = Backoff(policy, self._rng)
 
     # ------------------------------------------------------------------ loops
 
@@ -282,11 +279,11 @@ class Sender:
         """Get ``events`` into PhyCloud; the ones it refuses for good, as dead letters."""
         body = prepared.body if prepared else self._encoder().encode(events_body(events))
         if len(body) > self.policy.batch_max_bytes and len(events) > 1:
-            self.stats.update(add_batches_split=1)  # larger than BATCH_MAX_BYTES: halve it
-            middle = len(events) // 2
-            return self._deliver(batch, events[:middle]) + self._deliver(batch, events[middle:])
+            return self._halve(batch, events)  # larger than BATCH_MAX_BYTES
         headers = prepared.headers if prepared else request_headers(events, self._encoding)
-        outcome = self._send_with_retries(batch, len(events), body, headers)
+        outcome = self._send_with_retries(batch, events, body, headers)
+        if outcome is None:  # its answers kept not adding up
+            return self._halve(batch, events)
         if isinstance(outcome, Accepted):
             return [
                 DeadLetter(events[i].id, f"rejected: {reason}", None, reason)
@@ -303,6 +300,11 @@ class Sender:
             dead for part in split_refused(events, outcome) for dead in self._deliver(batch, part)
         ]
 
+    def _halve(self, batch: Batch, events: Sequence[QueuedEvent]) -> list[DeadLetter]:
+        self.stats.update(add_batches_split=1)
+        middle = len(events) // 2
+        return self._deliver(batch, events[:middle]) + self._deliver(batch, events[middle:])
+
     @property
     def _encoding(self) -> str:
         return self.policy.http_compression
@@ -314,11 +316,20 @@ class Sender:
         return encoder
 
     def _send_with_retries(
-        self, batch: Batch, count: int, body: bytes, headers: dict[str, str]
-    ) -> Accepted | Refused:
+        self, batch: Batch, events: Sequence[QueuedEvent], body: bytes, headers: dict[str, str]
+    ) -> Outcome | None:
+        """Send until PhyCloud's answer is final; None when UNACCOUNTED_BEFORE_SPLIT
+        answers in a row did not account for ``events`` (more than one): halve them."""
+        event_ids = [event.event_id for event in events]
+        unaccounted = 0  # answers in a row that did not account for these events
+
+        def wait(state: RetryCallState) -> float:
+            # one event whose answers never add up: no halving left, so no hurry
+            return self._backoff.seconds(state, long=unaccounted >= UNACCOUNTED_BEFORE_SPLIT)
+
         retrying = Retrying(
             retry=retry_if_exception_type(TransientSendError),
-            wait=self._wait,
+            wait=wait,
             sleep=self._sleep,
             before_sleep=lambda state: self._before_retry(batch, state),
             reraise=True,
@@ -331,26 +342,24 @@ class Sender:
                     raise Restamped
                 self._throttle.wait(len(body))
                 started = time.monotonic()
-                reply = self.transport.post_events(body, headers)
-                # the wall clock: a Retry-After date is one
-                outcome = classify(reply, count, time.time())
+                try:
+                    reply = self.transport.post_events(body, headers)
+                    # the wall clock: a Retry-After date is one
+                    outcome = classify(reply, event_ids, time.time())
+                except UnaccountedAnswerError as exc:
+                    unaccounted += 1
+                    if unaccounted >= UNACCOUNTED_BEFORE_SPLIT and len(events) > 1:
+                        self.stats.failed(exc, self._clock())  # counted as the ones before
+                        say_halving(exc, len(events))
+                        return None
+                    raise
+                except TransientSendError:
+                    unaccounted = 0
+                    raise
                 self.stats.observe_latency(time.monotonic() - started)
-                self._record_success(count, len(body), reply.status)
+                self._record_success(len(events), len(body), reply.status)
                 return outcome
         raise AssertionError("tenacity returns or raises")
-
-    def _wait(self, state: RetryCallState) -> float:
-        """Retry-After when the server gave one (plus a little jitter); RETRY_MAX_S for
-        refusals data cannot fix; else exponential backoff with full jitter."""
-        exc = state.outcome.exception() if state.outcome else None
-        if isinstance(exc, EndpointRefusedError):
-            return self.policy.retry_max_s
-        if isinstance(exc, TransientSendError) and exc.retry_after is not None:
-            # never sooner than RETRY_MIN_S: "Retry-After: 0", a negative number or a
-            # date in the past (a robot whose clock runs ahead) would make a tight loop
-            wait = max(exc.retry_after, self.policy.retry_min_s)
-            return wait * (1 + RETRY_AFTER_JITTER * self._rng.random())
-        return float(self._backoff(state))
 
     def _wait_beating(self, seconds: float) -> None:
         """Wait ``seconds`` or until stopped, beating at least once a second."""
@@ -370,17 +379,7 @@ class Sender:
         exc = state.outcome.exception() if state.outcome else None
         self._lanes.failed(self.store.now())
         self.stats.failed(exc, self._clock())
-        if isinstance(exc, EndpointRefusedError):
-            log.error(
-                "%s; keeping the queued events, retrying in %.0f s", exc, state.upcoming_sleep
-            )
-        elif state.attempt_number == 1 or state.attempt_number % 10 == 0:
-            log.warning(
-                "send failed (%s), attempt %d; retrying in %.1f s",
-                exc,
-                state.attempt_number,
-                state.upcoming_sleep,
-            )
+        say_retrying(exc, state.attempt_number, state.upcoming_sleep)
         with contextlib.suppress(QueueError):  # a lease that runs out only means a resend
             self.store.renew(batch)
 

@@ -30,6 +30,10 @@ class SendStats:
     last_error_class: str | None = None  # "HTTP 503", "ConnectError": no details, no key
     last_error_at: float | None = None
     last_status: int | None = None
+    # a refusal only the operator can fix (TLS, a key, a proxy's credentials): status
+    # is unhealthy with it until a request succeeds again
+    last_refusal: str | None = None
+    last_refusal_at: float | None = None
     live_events_sent: int = 0  # the live lane's: the newest first, after an outage
     backfill_events_sent: int = 0
     newest_delivered_at: float | None = None  # when the newest event PhyCloud has was queued
@@ -63,6 +67,8 @@ class SendStats:
     def failed(self, exc: BaseException | None, at: float) -> None:
         """Count an attempt that failed and will be retried, and remember why."""
         status = getattr(exc, "status", None)
+        if isinstance(exc, EndpointRefusedError):
+            self.update(last_refusal=str(exc), last_refusal_at=at)
         self.update(
             add_retries=1,
             last_error=str(exc),

@@ -26,9 +26,12 @@ from urllib.parse import urlsplit
 import httpcore
 import httpx
 
-from phytrace_edge.errors import ConfigError, EndpointRefusedError, TransientSendError
-from phytrace_edge.redact import Secret, leak_forms, redact
+from phytrace_edge.errors import EndpointRefusedError, TransientSendError
+from phytrace_edge.redact import Secret, redact, redact_url
+from phytrace_edge.ship import tls
+from phytrace_edge.ship.api_key import ApiKey
 from phytrace_edge.ship.responses import Reply
+from phytrace_edge.ship.tls import TlsOptions
 
 log = logging.getLogger(__name__)
 
@@ -119,88 +122,199 @@ class DeadlineBackend(httpcore.NetworkBackend):
         self._backend.sleep(seconds)
 
 
-def _bounded_transport(verify: ssl.SSLContext | bool, deadline: Deadline) -> httpx.HTTPTransport:
-    """httpx's transport whose connection pool runs on the deadline backend (httpx has
-    no setting for the backend, so its pool is made again with the same defaults)."""
-    transport = httpx.HTTPTransport(verify=verify, trust_env=False)
+def _bounded_transport(
+    ssl_context: ssl.SSLContext | None, deadline: Deadline, proxy: str | None
+) -> httpx.HTTPTransport:
+    """httpx's transport whose connection pool (direct, or through ``proxy``) runs on
+    the deadline backend (httpx has no setting for the backend, so its pool is made
+    again with the same defaults)."""
+    transport = httpx.HTTPTransport(verify=ssl_context or False, trust_env=False)
     limits = httpx.Limits()
-    transport._pool = httpcore.ConnectionPool(
-        ssl_context=transport._pool._ssl_context,
-        max_connections=limits.max_connections,
-        max_keepalive_connections=limits.max_keepalive_connections,
-        keepalive_expiry=limits.keepalive_expiry,
-        network_backend=DeadlineBackend(deadline),
-    )
+    pool_options: dict[str, Any] = {
+        "ssl_context": ssl_context,
+        "max_connections": limits.max_connections,
+        "max_keepalive_connections": limits.max_keepalive_connections,
+        "keepalive_expiry": limits.keepalive_expiry,
+        "network_backend": DeadlineBackend(deadline),
+    }
+    if proxy is None:
+        transport._pool = httpcore.ConnectionPool(**pool_options)
+    else:  # CONNECT for https: the proxy relays bytes it cannot read
+        parsed = httpx.Proxy(proxy)
+        transport._pool = httpcore.HTTPProxy(
+            proxy_url=httpcore.URL(
+                scheme=parsed.url.raw_scheme,
+                host=parsed.url.raw_host,
+                port=parsed.url.port,
+                target=parsed.url.raw_path,
+            ),
+            proxy_auth=parsed.raw_auth,
+            proxy_headers=parsed.headers.raw,
+            proxy_ssl_context=tls.context(TlsOptions()) if parsed.url.scheme == "https" else None,
+            **pool_options,
+        )
     return transport
 
 
 class HttpTransport:
-    """httpx client for ``{endpoint}/events`` with the API key as a Bearer token."""
+    """httpx client for ``{endpoint}/events`` with the API key as a Bearer token,
+    directly or through ``proxy`` (``ship/proxy.py``), trusting and presenting what
+    ``tls`` says (``ship/tls.py``)."""
 
     def __init__(
-        self, endpoint: str, api_key: Secret, timeout_s: float, ca_bundle: str | None = None
+        self,
+        endpoint: str,
+        api_key: Secret | ApiKey,
+        timeout_s: float,
+        ca_bundle: str | None = None,
+        *,
+        tls_options: TlsOptions | None = None,
+        proxy: str | None = None,
     ) -> None:
         self.url = f"{endpoint.rstrip('/')}/events"
+        self.host = urlsplit(endpoint).hostname or endpoint
+        self.proxy = proxy
         self._timeout_s = timeout_s
-        self._key_forms = leak_forms(api_key.reveal())
-        if api_key and urlsplit(endpoint).scheme == "http" and not is_loopback(endpoint):
+        self._key = api_key if isinstance(api_key, ApiKey) else ApiKey(api_key)
+        options = self._tls_options = tls_options or TlsOptions(ca_bundle=ca_bundle)
+        self._client_cert = options.client is not None
+        if self._key.secret and urlsplit(endpoint).scheme == "http" and not is_loopback(endpoint):
             log.warning(
                 "PHYCLOUD_ENDPOINT %s is plain http to a non-loopback host: the API key would "
                 "cross the network unencrypted - use https",
-                endpoint,
+                redact_url(endpoint),
             )
         # TLS only for https: the CA certificates cost 1.2 MiB an http endpoint never uses
-        verify: ssl.SSLContext | bool = urlsplit(endpoint).scheme == "https"
-        if ca_bundle and verify:
-            verify = ssl.create_default_context()
-            try:  # in addition to the system CAs
-                verify.load_verify_locations(cafile=ca_bundle)
-            except (OSError, ssl.SSLError) as exc:
-                raise ConfigError(
-                    f"CA_BUNDLE={ca_bundle!r}: not a usable CA file ({exc})"
-                ) from None
-        headers = {"Authorization": f"Bearer {api_key.reveal()}"} if api_key else {}
+        https = urlsplit(endpoint).scheme == "https"
         self._deadline = Deadline()
         self._client = httpx.Client(
-            headers=headers,
             timeout=httpx.Timeout(timeout_s),
-            transport=_bounded_transport(verify, self._deadline),
+            transport=_bounded_transport(
+                tls.context(options) if https else None, self._deadline, proxy
+            ),
             follow_redirects=False,
         )
 
-    def post_events(self, body: bytes, headers: Mapping[str, str]) -> Reply:
-        self._deadline.until = time.monotonic() + self._timeout_s
+    @property
+    def api_key(self) -> ApiKey:
+        return self._key
+
+    def figures(self) -> dict[str, Any]:
+        """How this transport reaches PhyCloud, for ``status`` (nothing secret)."""
+        options = self._tls_options
+        trust = "none (http)"
+        if self.url.startswith("https:"):
+            trust = f"system store {tls.system_store() or '(none found: certifi)'}"
+            if options.ca_bundle:
+                trust += f" + CA_BUNDLE {options.ca_bundle}"
+        client = options.client
+        return {
+            "endpoint": redact_url(self.url.rsplit("/events", 1)[0]),
+            "proxy": None if self.proxy is None else redact_url(self.proxy),
+            "trust": trust,
+            "client_cert": None if client is None else client.cert,
+            "client_cert_expires_at": None if client is None else self._cert_expiry(client.cert),
+            "api_key_from": self._key.where,
+        }
+
+    @staticmethod
+    def _cert_expiry(path: str) -> float | None:
         try:
-            with self._client.stream("POST", self.url, content=body, headers=dict(headers)) as r:
+            return tls.certificate_expiry(path)
+        except (OSError, ValueError):  # checked at start; a file replaced since
+            return None
+
+    def post_events(self, body: bytes, headers: Mapping[str, str]) -> Reply:
+        reply = self._post(body, headers)
+        if reply.status in (401, 403) and self._key.reload():
+            # a rotated key file: the new key at once, not after RETRY_MAX_S
+            log.warning(
+                "PhyCloud refused the API key (HTTP %d); %s holds a new one: sending with it",
+                reply.status,
+                self._key.where,
+            )
+            reply = self._post(body, headers)
+        return reply
+
+    def _post(self, body: bytes, headers: Mapping[str, str]) -> Reply:
+        self._deadline.until = time.monotonic() + self._timeout_s
+        key = self._key.secret
+        sent = {**headers, "Authorization": f"Bearer {key.reveal()}"} if key else dict(headers)
+        try:
+            with self._client.stream("POST", self.url, content=body, headers=sent) as r:
                 answer = _read_at_most(r, MAX_REPLY_BYTES)
-                return Reply(r.status_code, self._mask_headers(r.headers), self._mask(answer))
+                return Reply(
+                    r.status_code,
+                    self._mask_headers(r.headers),
+                    self._mask(answer),
+                    # again after decoding: JSON may escape the key (\/, \u002f)
+                    mask=lambda text: redact(text, self._key.leak_forms),
+                )
         except httpx.TimeoutException as exc:
             raise TransientSendError(
                 f"timeout: no complete answer within HTTP_TIMEOUT_S ({type(exc).__name__})"
+                + self._via()
             ) from exc
+        except httpx.ProxyError as exc:
+            raise self._proxy_failure(exc) from exc
         except httpx.TransportError as exc:
-            if _untrusted_certificate(exc):
-                raise EndpointRefusedError(
-                    f"TLS: the certificate of {urlsplit(self.url).hostname} is not trusted "
-                    f"({self._safe(exc)}) - set CA_BUNDLE to the CA that signed it"
-                ) from exc
-            raise TransientSendError(f"{type(exc).__name__}: {self._safe(exc)}") from exc
+            refused = tls.handshake_failure(exc, self.host, self._client_cert)
+            if refused is not None:
+                raise EndpointRefusedError(f"{refused} [{self._safe(exc)}]") from exc
+            raise TransientSendError(
+                f"{type(exc).__name__}: {self._safe(exc)}{self._via()}{self._hint(exc)}"
+            ) from exc
         finally:
             self._deadline.until = None
+
+    def _proxy_failure(self, exc: httpx.ProxyError) -> TransientSendError:
+        """The proxy answered CONNECT with an error: its credentials refused (407) or
+        the destination forbidden (403) are for the operator to fix; anything else
+        (502: the proxy cannot reach PhyCloud) passes like an outage."""
+        text = self._safe(exc)
+        proxy = redact_url(self.proxy or "")
+        if "407" in text:
+            return EndpointRefusedError(
+                f"proxy {proxy} refused its credentials ({text}) - check the user and "
+                "password in HTTPS_PROXY (or PHYCLOUD_PROXY)"
+            )
+        if "403" in text:
+            return EndpointRefusedError(
+                f"proxy {proxy} does not allow {self.host} ({text}) - ask for PhyCloud's "
+                "host to be allowed"
+            )
+        return TransientSendError(f"ProxyError: {text}{self._via()}")
+
+    def _hint(self, exc: httpx.TransportError) -> str:
+        """A server that closes an https connection without a word may be refusing a
+        missing client certificate (an asyncio server sends no TLS alert to say so)."""
+        silent = isinstance(exc, httpx.RemoteProtocolError) and "without sending" in str(exc)
+        if silent and self.url.startswith("https:") and not self._client_cert:
+            return (
+                " - if PhyCloud (or a gateway before it) requires a client certificate, "
+                "set CLIENT_CERT and CLIENT_KEY"
+            )
+        return ""
+
+    def _via(self) -> str:
+        return "" if self.proxy is None else f" (through proxy {redact_url(self.proxy)})"
 
     def _mask(self, body: bytes) -> bytes:
         """An answer as it may be kept (a dead letter keeps PhyCloud's words): a server
         that echoes the request's headers must not put the key into the queue."""
-        for form in self._key_forms:
+        for form in self._key.leak_forms:
             body = body.replace(form.encode("utf-8", "replace"), b"***")
         return body
 
     def _mask_headers(self, headers: httpx.Headers) -> dict[str, str]:
-        return {name: redact(value, self._key_forms) for name, value in headers.items()}
+        return {name: redact(value, self._key.leak_forms) for name, value in headers.items()}
 
     def _safe(self, exc: BaseException) -> str:
         """An exception's text as it may go into logs and status: the key never."""
-        return redact(str(exc), self._key_forms)[:300]
+        text = redact(str(exc), self._key.leak_forms)
+        if self.proxy is not None:  # the proxy's password, in an error that quotes its URL
+            text = text.replace(self.proxy, redact_url(self.proxy))
+        return text[:300]
 
     def close(self) -> None:
         self._client.close()
@@ -215,17 +329,6 @@ def _read_at_most(response: httpx.Response, limit: int) -> bytes:
         if size >= limit:
             break
     return b"".join(chunks)[:limit]
-
-
-def _untrusted_certificate(exc: BaseException) -> bool:
-    """Whether a connection failed because the server's certificate did not verify: a
-    configuration problem to report loudly, not a network blip."""
-    cause: BaseException | None = exc
-    while cause is not None:
-        if isinstance(cause, ssl.SSLCertVerificationError):
-            return True
-        cause = cause.__cause__ or cause.__context__
-    return False
 
 
 class FunctionTransport:

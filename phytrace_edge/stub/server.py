@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import socket
+import ssl
 import sys
 from pathlib import Path
 
@@ -39,8 +40,10 @@ def run_stub(
     faults: Faults,
     seed: int | None,
     tls: tuple[str, str] | None = None,
+    client_ca: str | None = None,
 ) -> None:
-    """Serve until interrupted."""
+    """Serve until interrupted; with ``client_ca``, only clients presenting a
+    certificate that CA signed are served (mutual TLS)."""
     faults.check()
     store = StubStore(db)
     app = create_app(Stub(store, faults, api_key, seed))
@@ -56,6 +59,8 @@ def run_stub(
             lifespan="off",
             ssl_certfile=certfile,
             ssl_keyfile=keyfile,
+            ssl_ca_certs=client_ca,
+            ssl_cert_reqs=ssl.CERT_REQUIRED if client_ca else ssl.CERT_NONE,
         )
     )
     shown_host = f"[{host}]" if ":" in host else host

@@ -28,7 +28,7 @@ def more_than(items: list, count: int):
 def drain_rest(settings) -> None:
     """After the bridge stopped: send what is still queued (as `drain` would)."""
     with open_queue(settings) as store:
-        sender = Sender(store, http_transport(settings), send_policy(settings))
+        sender = Sender(store, http_transport(settings, {}), send_policy(settings))
         assert sender.drain(deadline=time.monotonic() + 60), "the queue did not drain"
 
 

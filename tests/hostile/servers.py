@@ -8,8 +8,17 @@ import socket
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 Behaviour = Callable[[socket.socket, "BadServer"], None]
+
+
+@dataclass(frozen=True)
+class Request:
+    """One request as it arrived: header names in lower case, the body as sent."""
+
+    headers: dict[str, str]
+    body: bytes
 
 
 class BadServer:
@@ -26,6 +35,7 @@ class BadServer:
         self._listener.settimeout(0.2)
         self.port = self._listener.getsockname()[1]
         self._threads: list[threading.Thread] = []
+        self._serving = threading.local()  # each connection is served by a thread of its own
         self._acceptor = threading.Thread(target=self._accept, daemon=True)
 
     @property
@@ -57,37 +67,46 @@ class BadServer:
         connection.settimeout(5)
         with connection:
             try:
-                while not self.stop.is_set() and read_request(connection):
+                while not self.stop.is_set():
+                    request = read_request(connection)
+                    if request is None:
+                        return
+                    self._serving.request = request
                     self.requests += 1
                     self.behaviour(connection, self)
             except OSError:
                 return  # the client gave up: what these tests want to see
+
+    @property
+    def request(self) -> Request:
+        """The request the behaviour is answering (in its connection's thread)."""
+        return self._serving.request
 
     def send(self, connection: socket.socket, data: bytes) -> None:
         connection.sendall(data)
         self.bytes_sent += len(data)
 
 
-def read_request(connection: socket.socket) -> bool:
-    """Read one HTTP request (headers and a Content-Length body); False at EOF."""
+def read_request(connection: socket.socket) -> Request | None:
+    """Read one HTTP request (headers and a Content-Length body); None at EOF."""
     data = b""
     while b"\r\n\r\n" not in data:
         chunk = connection.recv(65536)
         if not chunk:
-            return False
+            return None
         data += chunk
     head, _, body = data.partition(b"\r\n\r\n")
-    length = 0
+    headers = {}
     for line in head.split(b"\r\n")[1:]:
         name, _, value = line.partition(b":")
-        if name.strip().lower() == b"content-length":
-            length = int(value)
+        headers[name.strip().lower().decode("latin-1")] = value.strip().decode("latin-1")
+    length = int(headers.get("content-length", 0))
     while len(body) < length:
         chunk = connection.recv(65536)
         if not chunk:
-            return False
+            return None
         body += chunk
-    return True
+    return Request(headers, body)
 
 
 def trickle(interval_s: float) -> Behaviour:

@@ -3,16 +3,23 @@ queue database, dead letters or the metrics — also when a server echoes it bac
 
 from __future__ import annotations
 
+import gzip
 import json
 import signal
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import httpx
 import pytest
 
+from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.redact import Secret, leak_forms
+from phytrace_edge.ship.options import SendPolicy
+from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.transport import HttpTransport
 from tests.hostile.servers import BadServer
 from tests.processes import BridgeProcess, free_port, python_env, run_cli, status_json, wait_for
 
@@ -91,3 +98,78 @@ def dead_letters(env: dict[str, str]) -> int:
 
 def cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
     return run_cli(*args, **env)
+
+
+SLASHED_KEY = "phk_live/Zq8v2K9x7/Lw3Tn"
+# how a JSON encoder may write the key: every one decodes to SLASHED_KEY
+ESCAPED_KEYS = [
+    SLASHED_KEY.replace("/", "\\/"),
+    SLASHED_KEY.replace("/", "\\u002f"),
+    SLASHED_KEY.replace("/", "\\u002F"),
+    "".join(f"\\u{ord(c):04x}" for c in SLASHED_KEY),
+]
+
+
+def echo_escaped_key_in_rejections(connection: socket.socket, server: BadServer) -> None:
+    """PhyCloud that rejects the first events of each batch, quoting the request's
+    Authorization header in the reasons with the key JSON-escaped (one way per event);
+    its answer accounts for every event, so the rejected ones become dead letters."""
+    request = server.request
+    body = request.body
+    if request.headers.get("content-encoding") == "gzip":
+        body = gzip.decompress(body)
+    ids = [event["event_id"] for event in json.loads(body)["events"]]
+    items = [
+        f'{{"index":{i},"event_id":"{ids[i]}","reason":"unknown robot; Bearer {escaped}"}}'
+        for i, escaped in enumerate(ESCAPED_KEYS[: len(ids)])
+    ]
+    answer = (
+        f'{{"accepted":{len(ids) - len(items)},"duplicates":0,"rejected":[{",".join(items)}]}}'
+    ).encode()
+    server.send(
+        connection,
+        b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
+        + f"Content-Length: {len(answer)}\r\n\r\n".encode()
+        + answer,
+    )
+
+
+def key_pieces_in(data: bytes) -> list[str]:
+    """Every form of SLASHED_KEY found in ``data``: whole (as is, escaped,
+    percent-encoded) or any piece of it between its slashes."""
+    forms = {*leak_forms(SLASHED_KEY), *ESCAPED_KEYS, *SLASHED_KEY.split("/")}
+    return sorted(form for form in forms if form.encode() in data)
+
+
+def queue_files(queue: Path) -> bytes:
+    """The queue's files as they are on disk: the database and its WAL."""
+    return b"".join(
+        path.read_bytes() for path in (queue, queue.with_name(queue.name + "-wal")) if path.exists()
+    )
+
+
+def test_a_key_echoed_with_json_escapes_is_masked_once_decoded(tmp_path: Path) -> None:
+    queue = tmp_path / "q.db"
+    store = QueueStore.open(queue)
+    store.put_many([{"event_id": f"e{i}", "n": i} for i in range(10)])
+    with BadServer(echo_escaped_key_in_rejections) as server:
+        transport = HttpTransport(server.endpoint, Secret(SLASHED_KEY), 5.0)
+        sender = Sender(store, transport, SendPolicy(batch_size=10))
+        try:
+            assert sender.drain(deadline=time.monotonic() + 30) is True
+        finally:
+            transport.close()
+    letters = store.dead_letters.list()
+    assert [letter.event_id for letter in letters] == ["e0", "e1", "e2", "e3"]
+    assert {letter.reason for letter in letters} == {"rejected: unknown robot; Bearer ***"}
+    on_disk = queue_files(queue)  # the WAL holds the dead letters until a checkpoint
+    store.close()
+    on_disk += queue_files(queue)
+
+    listing = run_cli("dead-letters", "list", QUEUE_PATH=str(queue))
+    exported = run_cli("dead-letters", "export", QUEUE_PATH=str(queue))
+    assert listing.returncode == 0 and exported.returncode == 0, listing.stderr + exported.stderr
+    assert "4 dead letter(s)" in listing.stdout and "Bearer ***" in listing.stdout
+    assert exported.stdout.count("unknown robot; Bearer ***") == 8  # reason and response
+    outputs = (listing.stdout + listing.stderr + exported.stdout + exported.stderr).encode()
+    assert key_pieces_in(on_disk) == [] and key_pieces_in(outputs) == []

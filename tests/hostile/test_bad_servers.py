@@ -4,6 +4,7 @@ flood, tell the bridge to come back at once, or answer 200 with a captive portal
 from __future__ import annotations
 
 import email.utils
+import signal
 import time
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import MAX_REPLY_BYTES, HttpTransport
 from tests.hostile.servers import BadServer, answer, elapsed, huge_body, trickle
-from tests.processes import wait_for
+from tests.processes import BridgeProcess, status_json, wait_for
 
 BODY = b'{"events":[{"event_id":"x"}]}'
 HEADERS = {"Content-Type": "application/json"}
@@ -94,6 +95,45 @@ def _send_once(sender: Sender) -> None:
     try:
         body = b'{"events":[' + b",".join(e.json for e in batch.events) + b"]}"
         reply = sender.transport.post_events(body, request_headers(batch.events, "none"))
-        classify(reply, len(batch.events), time.time())
+        classify(reply, [event.event_id for event in batch.events], time.time())
     finally:
         sender.store.release(batch)
+
+
+def test_a_200_that_does_not_account_for_the_batch_shows_in_status(tmp_path: Path) -> None:
+    """A real bridge against PhyCloud answering `accepted: 0` to everything: nothing is
+    deleted or dead-lettered, and `status --json` counts the answers."""
+    none_accepted = answer(
+        "200 OK",
+        {"Content-Type": "application/json"},
+        b'{"accepted": 0, "duplicates": 0, "rejected": []}',
+    )
+    with BadServer(none_accepted) as server:
+        env = {
+            "PHYCLOUD_ENDPOINT": server.endpoint,
+            "QUEUE_PATH": str(tmp_path / "q.db"),
+            "BRIDGE_INPUT": "sim",
+            "SAMPLE_RATE_HZ": "20",
+            "FLUSH_INTERVAL_S": "0.2",
+            "RETRY_MIN_S": "0.05",
+            "RETRY_MAX_S": "0.3",
+        }
+        bridge = BridgeProcess(tmp_path / "bridge.log", **env).start()
+        try:
+            # retried (and halved, or a single event retried every RETRY_MAX_S)
+            doc = wait_for(
+                lambda: (d := status_json(**env)[1]).get("unexpected_answers", 0) > 6 and d,
+                60,
+                "status to count the answers that do not add up",
+            )
+            bridge.signal(signal.SIGTERM)
+            assert bridge.wait(30) == 0
+        finally:
+            bridge.stop()
+    assert doc["sent_total"] == 0 and doc["dead_letters"] == 0 and doc["drops"] == {}
+    assert doc["queue"]["depth"] > 0 and doc["accounting"]["balanced"]
+    assert doc["last_error_class"] == "HTTP 200"
+    assert doc["last_error"].startswith("PhyCloud's answer accounts for 0 of ")
+    assert doc["last_error"].endswith(" - kept the batch")
+    log = (tmp_path / "bridge.log").read_text()
+    assert "WARNING phytrace_edge.ship.retries: PhyCloud's answer accounts for 0 of " in log

@@ -119,6 +119,17 @@ def test_status_and_the_watchdog_judge_a_stage_by_the_same_bound() -> None:
     assert stalled(45.0, 30.0) and not stalled(30.0, 30.0) and not stalled(None, 30.0)
 
 
+def test_unexpected_answers_are_in_status_and_on_its_sent_line() -> None:
+    from phytrace_edge.cli.status import render_status
+
+    doc = report(stats(sender={"unexpected_answers": 4, "last_success_at": NOW - 1}), LIMITS, NOW)
+    assert doc["unexpected_answers"] == 4
+    sent = next(line for line in render_status(doc).splitlines() if line.startswith("  sent"))
+    assert sent.endswith("; 4 unexpected answer(s), batches kept")
+    quiet = report(stats(sender={"last_success_at": NOW - 1}), LIMITS, NOW)
+    assert quiet["unexpected_answers"] == 0 and "unexpected" not in render_status(quiet)
+
+
 def test_the_status_report_has_exactly_the_declared_keys() -> None:
     """StatusReport (runtime/documents.py) is what status --json prints, key for key."""
     document = report(stats(sender={"last_success_at": NOW - 1}), LIMITS, NOW)

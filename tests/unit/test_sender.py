@@ -421,3 +421,146 @@ def test_a_batch_retrying_across_a_clock_step_is_sent_again_repaired(tmp_path: P
     assert all(e["captured_at"].startswith("2026-") for e in delivered)
     assert all(e["wall_clock"]["corrected_by_s"] > 0 for e in delivered)
     assert [e["captured_at"][:4] for e in cloud.requests[0][0]] == ["2001"] * 5  # the first try
+
+
+# ------------------------------------------------------------------ answers that do not add up
+
+
+def accounting(accepted: int, **extra) -> Reply:
+    """A 200 answer: ``accepted``, no duplicates, none rejected, unless ``extra`` says."""
+    document = {"accepted": accepted, "duplicates": 0, "rejected": [], **extra}
+    return Reply(200, {}, orjson.dumps(document))
+
+
+BAD_ANSWERS = {
+    "none-accepted": lambda events: accounting(0),
+    "one-short": lambda events: accounting(len(events) - 1),
+    "one-too-many": lambda events: accounting(len(events) + 1),
+    "rejected-without-event-id": lambda events: accounting(
+        len(events) - 1, rejected=[{"index": 0, "reason": "bad"}]
+    ),
+    "one-based-index": lambda events: accounting(
+        len(events) - 1,
+        rejected=[{"index": 1, "event_id": events[0]["event_id"], "reason": "bad"}],
+    ),
+    "unknown-event-id": lambda events: accounting(
+        len(events) - 1, rejected=[{"index": 0, "event_id": "nope", "reason": "bad"}]
+    ),
+    "rejected-twice": lambda events: accounting(
+        len(events) - 2,
+        rejected=[{"event_id": events[0]["event_id"]}, {"event_id": events[0]["event_id"]}],
+    ),
+}
+
+
+@pytest.mark.parametrize("bad", BAD_ANSWERS.values(), ids=BAD_ANSWERS.keys())
+def test_an_answer_that_does_not_account_for_the_batch_deletes_nothing(store, bad) -> None:
+    put(store, 10)
+    requests: list[int] = []
+    stop = threading.Event()
+
+    def wrong(body: bytes, headers: Mapping[str, str]) -> Reply:
+        events = orjson.loads(gzip.decompress(body))["events"]
+        requests.append(len(events))
+        if len(requests) == 5:
+            stop.set()
+        return bad(events)
+
+    s = Sender(
+        store, FunctionTransport(wrong), SendPolicy(batch_size=10), stop=stop, sleep=lambda s: None
+    )
+    assert s.drain() is False
+    assert requests == [10, 10, 10, 5, 5]  # three answers in a row, then halves
+    assert store.stats().depth == 10 and store.stats().acked_total == 0
+    assert store.dead_letters.list() == [] and store.stats().drops == {}
+    assert store.stats().leased == 0  # released, sent again later
+    assert s.stats.unexpected_answers == 5 and s.stats.events_sent == 0
+    assert s.stats.last_error is not None and "kept the batch" in s.stats.last_error
+
+
+def test_an_answer_that_does_not_add_up_is_logged_and_retried_with_backoff(
+    store, caplog: pytest.LogCaptureFixture
+) -> None:
+    put(store, 10)
+    waits: list[float] = []
+    cloud = FakeCloud()
+
+    def zero_twice(body: bytes, headers: Mapping[str, str]) -> Reply:
+        reply = cloud(body, headers)
+        return accounting(0) if len(cloud.requests) <= 2 else reply
+
+    s = Sender(
+        store,
+        FunctionTransport(zero_twice),
+        SendPolicy(batch_size=10, retry_min_s=0.5, retry_max_s=30),
+        sleep=waits.append,
+    )
+    with caplog.at_level(logging.WARNING):
+        assert s.drain() is True
+    assert [len(events) for events, _ in cloud.requests] == [10, 10, 10]  # no halving yet
+    assert len(waits) == 2 and all(0.5 <= w <= 30 for w in waits)
+    assert store.stats().acked_total == 10 and store.dead_letters.list() == []
+    assert (s.stats.unexpected_answers, s.stats.batches_split) == (2, 0)
+    lines = [r.getMessage() for r in caplog.records if "accounts for" in r.getMessage()]
+    assert len(lines) == 2
+    assert lines[0].startswith(
+        "PhyCloud's answer accounts for 0 of 10 events (accepted 0, duplicates 0, "
+        "rejected 0) - kept the batch, retrying in "
+    )
+
+
+def test_halves_down_to_the_event_whose_answers_never_add_up_and_keeps_it(store) -> None:
+    """PhyCloud that never counts e00003: its batch is halved until the events it does
+    count get through; e00003, alone, is neither deleted nor dead-lettered, but retried
+    every RETRY_MAX_S until PhyCloud's answer accounts for it."""
+    put(store, 8)
+    requests: list[list[str]] = []
+    waits: list[float] = []
+    fixed = threading.Event()
+    stop = threading.Event()
+
+    def miscounts(body: bytes, headers: Mapping[str, str]) -> Reply:
+        ids = [e["event_id"] for e in orjson.loads(gzip.decompress(body))["events"]]
+        requests.append(ids)
+        forgotten = int("e00003" in ids and not fixed.is_set())
+        return accounting(len(ids) - forgotten)
+
+    def sleep(seconds: float) -> None:
+        waits.append(seconds)
+        if len(requests) >= 16:
+            stop.set()
+
+    policy = SendPolicy(batch_size=10, retry_min_s=0.5, retry_max_s=45)
+    s = Sender(store, FunctionTransport(miscounts), policy, stop=stop, sleep=sleep)
+    assert s.drain() is False
+    sizes = [len(ids) for ids in requests]
+    assert sizes == [8, 8, 8, 4, 4, 4, 2, 2, 2, 2, 1, 1, 1, 1, 1, 1]
+    assert requests[6] == ["e00000", "e00001"] and requests[10] == ["e00002"]
+    assert all(ids == ["e00003"] for ids in requests[11:])
+    assert waits[-3:] == [45, 45, 45]  # e00003 alone, after 3 answers: RETRY_MAX_S
+    assert store.stats().depth == 8 and store.stats().acked_total == 0
+    assert store.dead_letters.list() == [] and store.stats().drops == {}
+    assert s.stats.batches_split == 3
+    assert s.stats.unexpected_answers == 3 + 3 + 3 + 5
+
+    fixed.set()  # PhyCloud counts it now: everything goes, nothing is lost
+    stop.clear()
+    assert s.drain() is True
+    assert store.stats().acked_total == 8 and store.dead_letters.list() == []
+
+
+def test_rejections_are_dead_lettered_by_event_id_in_any_order(store) -> None:
+    put(store, 4)
+
+    def rejects_two(body: bytes, headers: Mapping[str, str]) -> Reply:
+        rejected = [
+            {"index": 3, "event_id": "e00003", "reason": "late"},
+            {"index": 1, "event_id": "e00001", "reason": "unknown robot"},
+        ]
+        return accounting(2, rejected=rejected)
+
+    s = Sender(store, FunctionTransport(rejects_two), SendPolicy(), sleep=lambda s: None)
+    assert s.drain() is True
+    letters = {letter.event_id: letter.reason for letter in store.dead_letters.list()}
+    assert letters == {"e00001": "rejected: unknown robot", "e00003": "rejected: late"}
+    assert store.stats().acked_total == 2 and s.stats.unexpected_answers == 0
