@@ -102,6 +102,11 @@ class BridgeCollector:
             "batches_split", "Batches split to isolate rejected events.", sender.batches_split
         )
         yield counter("auth_failures", "Answers 401/403.", sender.auth_failures)
+        yield counter(
+            "unexpected_answers",
+            "Answers on which nothing was deleted: not PhyCloud's, or not adding up.",
+            sender.unexpected_answers,
+        )
         yield gauge(
             "last_success_timestamp_seconds",
             "When PhyCloud last accepted a batch.",

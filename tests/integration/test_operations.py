@@ -233,6 +233,7 @@ def test_metrics_endpoint_and_json_logs(tmp_path: Path, stub) -> None:
             "phytrace_events_dropped_total",
             "phytrace_send_latency_seconds_bucket",
             "phytrace_send_retries_total",
+            "phytrace_unexpected_answers_total 0.0",  # the stub's answers add up
             'phytrace_topic_messages_total{topic="/odom"}',
             'phytrace_topic_last_seen_age_seconds{topic="/scan"}',
         ):

@@ -56,6 +56,7 @@ def delivered_everything(
     wait_for(lambda: stub.stats()["unique"] >= at_least, 60, f"{at_least} events at PhyCloud")
     accounting = stop_and_account(bridge, settings)
     received = stub.stats()
+    print(f"accounting {accounting}; PhyCloud stored {received['unique']}")  # for -s runs
     assert accounting["dropped"] == {}, accounting
     assert accounting["dead_lettered"] == 0, accounting
     assert received["unique"] == received["received"] == accounting["delivered"], received

@@ -210,6 +210,8 @@ def test_mutual_tls_delivers_every_event_with_the_robots_certificate(
         link = document["link"]
         assert link["client_cert"] == str(robot.cert)
         assert 9 * 86400 < link["client_cert_expires_in_s"] <= 10 * 86400
+        # ten days left: within the 14 days status warns before
+        assert any(f"CLIENT_CERT {robot.cert} expires in 9." in w for w in document["warnings"])
         delivered_everything(bridge, settings, gateway.stub)  # type: ignore[attr-defined]
     finally:
         bridge.stop()

@@ -227,3 +227,50 @@ def test_a_running_service_s_accounting_is_read_at_its_heartbeat() -> None:
         live(1.0, writer=WRITER_OK, queue_counters=moment, ledger=ledger),
     )
     assert doc["accounting"]["built"] == 12 and doc["accounting"]["balanced"]
+
+
+def test_a_refusal_is_a_problem_until_a_request_succeeds_again() -> None:
+    tls = "TLS: the certificate of api.example.com is signed by a CA this robot does not trust"
+    refused = {"last_refusal": tls, "last_refusal_at": NOW - 5, "last_error_at": NOW - 5}
+    doc = report(stats(sender=refused), LIMITS, NOW)
+    assert doc["problems"] == [tls] and exit_code(doc) == 1
+    doc = report(stats(sender={**refused, "last_success_at": NOW - 1}), LIMITS, NOW)
+    assert doc["problems"] == [] and doc["healthy"]
+
+
+def test_a_refused_key_names_where_the_key_comes_from() -> None:
+    sender = {"last_status": 401, "last_refusal": "HTTP 401", "last_refusal_at": NOW - 2}
+    link = {"api_key_from": "PHYCLOUD_API_KEY_FILE /etc/phytrace-edge/api_key"}
+    doc = report(stats(sender=sender, link=link), LIMITS, NOW)
+    assert doc["problems"] == [
+        "PhyCloud refuses the API key (HTTP 401) - check PHYCLOUD_API_KEY_FILE "
+        "/etc/phytrace-edge/api_key"
+    ]
+    doc = report(stats(sender=sender), LIMITS, NOW)  # an older bridge's document: no link
+    assert doc["problems"] == ["PhyCloud refuses the API key (HTTP 401) - check PHYCLOUD_API_KEY"]
+
+
+def test_why_sending_fails_is_shown_at_once_and_health_waits_as_for_an_outage() -> None:
+    error = "ConnectError: [Errno 111] Connection refused (through proxy http://p:3128)"
+    sender = {"last_error": error, "last_error_at": NOW - 3, "last_success_at": NOW - 30}
+    doc = report(stats(sender=sender), LIMITS, NOW)
+    assert doc["warnings"] == [f"sending fails: {error}"] and doc["healthy"]
+    old = {**sender, "last_error_at": NOW - 61}  # a minute without a new error: over
+    assert report(stats(sender=old), LIMITS, NOW)["warnings"] == []
+
+
+def test_a_client_certificate_is_warned_of_before_it_expires() -> None:
+    def link_warnings(left_s: float) -> list[str]:
+        link = {"client_cert": "/etc/robot.crt", "client_cert_expires_at": NOW + left_s}
+        doc = report(stats(link=link), LIMITS, NOW)
+        assert doc["link"]["client_cert_expires_in_s"] == round(left_s)
+        return doc["warnings"]
+
+    assert link_warnings(30 * 86400) == []
+    assert link_warnings(3 * 86400) == [
+        "CLIENT_CERT /etc/robot.crt expires in 3.0 days (2027-01-18T08:00:00.000Z): renew it"
+    ]
+    assert link_warnings(-86400) == [
+        "CLIENT_CERT /etc/robot.crt expired on 2027-01-14T08:00:00.000Z (by this robot's "
+        "clock): renew it"
+    ]
