@@ -204,8 +204,12 @@ def api_key(s: Settings, env: Mapping[str, str]) -> ApiKey:
         key = ApiKey.from_file(s.phycloud_api_key_file, "PHYCLOUD_API_KEY_FILE")
     elif not s.phycloud_api_key and env.get("CREDENTIALS_DIRECTORY"):
         credential = Path(env["CREDENTIALS_DIRECTORY"].split(":")[0]) / CREDENTIAL_NAME
-        if not credential.exists():
+        try:
+            credential.stat()
+        except FileNotFoundError:  # credentials, but not the key: it is not required
             return ApiKey(s.phycloud_api_key)
+        except OSError:
+            pass  # cannot be read: from_file says why, in one line
         key = ApiKey.from_file(str(credential), f"systemd credential {CREDENTIAL_NAME}")
     else:
         return ApiKey(s.phycloud_api_key)

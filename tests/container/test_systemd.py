@@ -2,7 +2,8 @@
 installed by the steps of docs/operations.md as written (two substitutions: the package
 comes from this checkout, and the editor step becomes a sed), so the docs cannot drift.
 Then: READY, the watchdog on a frozen process, a restart after kill -9, a clean stop,
-the state directory's modes, the documented status command, journal priorities."""
+the state directory's modes, the documented status command, journal priorities, and
+`systemctl reload` (SIGHUP: a line, and the bridge lives on)."""
 
 from __future__ import annotations
 
@@ -30,7 +31,6 @@ BOOT_FLAGS = (
     "--network", "host", "--stop-signal", "SIGRTMIN+3",
 )  # fmt: skip
 ENV_FILE = "/etc/phytrace-edge/phytrace-edge.env"
-CREDENTIAL_KEY = "phk_live_credential_0123456789abcdef"
 
 
 def install_steps(endpoint: str) -> list[str]:
@@ -118,17 +118,7 @@ def machine() -> Iterator[Machine]:
         docker("rm", "-f", "-v", name, check=False)
 
 
-def credential_steps(key: str) -> list[str]:
-    """The block of docs/operations.md that moves the key into a systemd credential,
-    one command per line (continuations joined), with the key filled in."""
-    section = DOCS.read_text().split("**The key from a systemd credential**", 1)[1]
-    block = section.split("```sh\n", 1)[1].split("```", 1)[0].replace("\\\n", "")
-    return [line.replace("phk_live_...", key) for line in block.splitlines() if line.strip()]
-
-
-def test_the_unit_installed_as_documented_runs_under_real_systemd(
-    machine: Machine, stub, stub_factory
-) -> None:
+def test_the_unit_installed_as_documented_runs_under_real_systemd(machine: Machine, stub) -> None:
     for command in install_steps(stub.endpoint):
         try:
             machine.sh(command)
@@ -182,30 +172,20 @@ def test_the_unit_installed_as_documented_runs_under_real_systemd(
     assert "subscribed to" not in warnings  # INFO lines stay out of -p warning
     assert not re.search(r"^<\d>", warnings, re.MULTILINE)  # journald stripped the prefix
 
-    # a clean stop: exit 0, nothing lost from the queue's point of view
-    machine.sh("systemctl stop phytrace-edge")
-    stopped = machine.show("Result", "ExecMainStatus", "ActiveState")
-    assert stopped == {"Result": "success", "ExecMainStatus": "0", "ActiveState": "inactive"}
-
-    # the key as a systemd credential, by the steps the docs give, to a PhyCloud that
-    # requires it; then `systemctl reload` (SIGHUP) reads it again and stops nothing
-    keyed = stub_factory("--api-key", CREDENTIAL_KEY, name="keyed")
-    machine.sh(f"sed -i 's|^PHYCLOUD_ENDPOINT=.*|PHYCLOUD_ENDPOINT={keyed.endpoint}|' {ENV_FILE}")
-    machine.sh(f"echo PHYCLOUD_API_KEY=wrong-key >> {ENV_FILE}")  # what the steps remove
-    for command in credential_steps(CREDENTIAL_KEY):
-        machine.sh(command)
-    wait_for(lambda: keyed.stats()["unique"] > 5, 90, "events sent with the credential's key")
-    assert CREDENTIAL_KEY not in machine.sh(f"cat {ENV_FILE}")
+    # `systemctl reload` (ExecReload=): SIGHUP, one line, and the bridge lives on
     pid = machine.show("MainPID")["MainPID"]
     machine.sh("systemctl reload phytrace-edge")
     wait_for(
         lambda: (
-            "SIGHUP: read the API key again from systemd credential"
+            "restart the service to change it"
             in machine.sh("journalctl -u phytrace-edge --no-pager -o cat")
         ),
         30,
         "the reload's line",
     )
     assert machine.show("MainPID", "ActiveState") == {"MainPID": pid, "ActiveState": "active"}
-    assert CREDENTIAL_KEY not in machine.sh("journalctl -u phytrace-edge --no-pager -o cat")
+
+    # a clean stop: exit 0, nothing lost from the queue's point of view
     machine.sh("systemctl stop phytrace-edge")
+    stopped = machine.show("Result", "ExecMainStatus", "ActiveState")
+    assert stopped == {"Result": "success", "ExecMainStatus": "0", "ActiveState": "inactive"}
