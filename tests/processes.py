@@ -128,7 +128,11 @@ class StubProcess:
             self.stop()
             raise AssertionError(f"stub did not start: {line!r}; see {self.log}")
         self.port = int(match.group(1))
-        wait_for(self._healthy, 20, "the stub to answer /healthz")
+        try:
+            wait_for(self._healthy, 20, "the stub to answer /healthz")
+        except AssertionError:
+            self.stop()  # never left running when it did not come up
+            raise
         return self
 
     def _healthy(self) -> bool:
