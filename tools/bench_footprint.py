@@ -2,7 +2,7 @@
 baselines in one run.
 
     .venv/bin/python tools/bench_footprint.py                    # about 3 minutes
-    .venv-ros/bin/python tools/bench_footprint.py --ros          # + run --input ros
+    .venv-kilted/bin/python tools/bench_footprint.py --ros          # + run --input ros
     .venv/bin/python tools/bench_footprint.py --drain-events 432000   # a day at 5 Hz
 
 For each process: RSS from ``/proc/<pid>/smaps_rollup`` split into anonymous (the heap,
@@ -238,7 +238,7 @@ def ros_rows(workdir: Path, seconds: float, floor: Footprint) -> list[str]:
     try:
         import rclpy  # noqa: F401 - only to say early that rclpy is missing
     except ImportError:
-        return ["| `run --input ros`: rclpy is not importable here (use .venv-ros) | | | | | |"]
+        return ["| `run --input ros`: rclpy is not importable here (use .venv-kilted) | | | | | |"]
     env = {
         **os.environ,
         "ROS_DOMAIN_ID": "218",

@@ -24,16 +24,16 @@ CHECKS = [
 
 
 def install_real_rclpy() -> None:
-    """.venv-ros: the bridge with real rclpy (ROS 2 wheels), and colcon with ament_cmake
-    to build it as a ROS package, for tests/ros. Where the
-    wheels cannot install (they are built for CPython 3.11), those tests say why and
-    skip; in CI they fail instead."""
-    try:
-        ensure_venv(".venv-ros", ".[ros-wheels,ros-build]")
-    except subprocess.CalledProcessError as exc:
-        print(
-            f"warning: the ROS 2 wheels did not install ({exc}); tests/ros on real rclpy will skip"
-        )
+    """Real rclpy from the package index, a venv per ROS 2 distribution (their wheels
+    conflict): .venv-jazzy (the jazzy extra, the product's distro) and .venv-kilted
+    (the kilted extra, with colcon and ament_cmake to build the bridge as a ROS
+    package), for tests/ros. Where the wheels cannot install (x86_64 only), those tests
+    say why and skip; in CI they fail instead."""
+    for venv, extras in ((".venv-jazzy", ".[jazzy]"), (".venv-kilted", ".[kilted,ros-build]")):
+        try:
+            ensure_venv(venv, extras)
+        except subprocess.CalledProcessError as exc:
+            print(f"warning: the ROS 2 wheels ({extras}) did not install ({exc}); tests/ros skip")
 
 
 def install_node_reader() -> None:

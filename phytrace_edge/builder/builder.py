@@ -85,6 +85,9 @@ class UDMBuilder:
         self._clock = clock or SystemClock()
         self._lock = threading.Lock()
         self._latest: dict[str, Latest] = {}
+        # when each topic's latest message was received, /rosout and the extra topics
+        # included (``status``'s last_seen_age_s)
+        self._received_mono: dict[str, float] = {}
         self._diagnostics = DiagnosticsTracker()
         self._transitions = TransitionTracker()
         self._goals = GoalTracker()
@@ -114,23 +117,35 @@ class UDMBuilder:
         """The UDM ``identity`` of this robot."""
         return dict(self._identity)
 
-    def add_reading(self, topic: str, reading: Reading) -> None:
-        """Record ``reading`` as the latest of ``topic`` (a canonical topic name); a
+    def add_reading(self, topic: str, reading: Reading, age_s: float = 0.0) -> None:
+        """Record ``reading`` as the latest of ``topic`` (a canonical topic name),
+        received ``age_s`` ago (a message taken at the tick waited for it); a
         ``/rosout`` record becomes a log record of its own."""
         now_mono, now_wall = self._clock.monotonic(), self._clock.wall()
+        received = now_mono - age_s
+        with self._lock:
+            self._received_mono[topic] = received
         if topic == "/rosout":
             self.logs.observe(cast(LogReading, reading), now_mono)
             return
         with self._lock:
-            self._latest[topic] = Latest(reading, now_mono)
+            self._latest[topic] = Latest(reading, received)
             accumulate = self.accumulators.get(topic)
             if accumulate is not None:
                 accumulate(reading, now_wall)
 
-    def add_message(self, topic: str, msg: Any) -> None:
-        """A message of a ``TOPICS_EXTRA`` topic (any type)."""
+    def add_message(self, topic: str, msg: Any, age_s: float = 0.0) -> None:
+        """A message of a ``TOPICS_EXTRA`` topic (any type), received ``age_s`` ago."""
         if self.extra.wants(topic):
-            self.extra.offer(topic, msg, self._clock.monotonic())
+            now_mono = self._clock.monotonic()
+            with self._lock:
+                self._received_mono[topic] = now_mono - age_s
+            self.extra.offer(topic, msg, now_mono, now_mono - age_s)
+
+    def extra_due(self, topic: str) -> bool:
+        """Whether a ``TOPICS_EXTRA`` topic is due now (its ``rate_hz``): an input that
+        takes messages at the tick takes this topic's only then (``Feed.due``)."""
+        return self.extra.due(topic, self._clock.monotonic())
 
     def side_events(self, captured_at_s: float | None = None) -> list[Built]:
         """The log records and extra-topic events that came in since the last call.
@@ -202,12 +217,13 @@ class UDMBuilder:
         return Built(event, important)
 
     def topic_ages(self) -> dict[str, float]:
-        """Seconds since each topic's latest reading arrived."""
+        """Seconds since each topic's latest message was received (the table's,
+        /rosout's and the extra topics')."""
         now = self._clock.monotonic()
         with self._lock:
             return {
-                topic: round(now - latest.received_mono_s, 3)
-                for topic, latest in self._latest.items()
+                topic: round(max(0.0, now - received), 3)
+                for topic, received in self._received_mono.items()
             }
 
     def topics_seen(self) -> list[str]:

@@ -56,12 +56,23 @@ class TopicEvents:
     def wants(self, topic: str) -> bool:
         return topic in self._specs
 
-    def offer(self, topic: str, msg: Any, now_mono_s: float) -> None:
-        """Keep ``msg`` as the latest of ``topic``; convert it now if the topic is due."""
+    def offer(
+        self, topic: str, msg: Any, now_mono_s: float, received_mono_s: float | None = None
+    ) -> None:
+        """Keep ``msg`` (received at ``received_mono_s``, default now) as the latest of
+        ``topic``; convert it now if the topic is due."""
         with self._lock:
-            self._latest[topic] = (msg, now_mono_s)
+            self._latest[topic] = (msg, now_mono_s if received_mono_s is None else received_mono_s)
             if self._due(topic, now_mono_s):
                 self._consider(topic, now_mono_s)
+
+    def due(self, topic: str, now_mono_s: float) -> bool:
+        """Whether a message of ``topic`` offered now would be converted (always, for a
+        topic that is not an extra topic)."""
+        if topic not in self._specs:
+            return True
+        with self._lock:
+            return self._due(topic, now_mono_s)
 
     def take(self, now_mono_s: float) -> list[TopicSample]:
         """The samples to send now: those ready, and the latest of each topic now due."""

@@ -35,9 +35,11 @@ class Dispatcher:
 
     def __init__(
         self,
-        on_reading: Callable[[str, Reading], None],
-        on_other: Callable[[str, Any], None] = lambda topic, msg: None,
+        on_reading: Callable[[str, Reading, float], None],
+        on_other: Callable[[str, Any, float], None] = lambda topic, msg, age_s: None,
     ) -> None:
+        """``on_reading`` and ``on_other`` get the topic, the reading or message, and
+        how long ago the message was received (``on_message``'s ``age_s``)."""
         self._on_reading, self._on_other = on_reading, on_other
         self._handlers = {spec.name: spec.handler for spec in TOPICS}
         self._lock = threading.Lock()
@@ -45,13 +47,14 @@ class Dispatcher:
         self.received: Counter[str] = Counter()
         self.rejected: Counter[tuple[str, str]] = Counter()
 
-    def on_message(self, topic: str, msg: Any) -> None:
-        """Handle one message of canonical ``topic``; never raises."""
+    def on_message(self, topic: str, msg: Any, age_s: float = 0.0) -> None:
+        """Handle one message of canonical ``topic``, received ``age_s`` ago (a
+        message taken at the sample tick waited in its subscription); never raises."""
         with self._lock:
             self.received[topic] += 1
         handler = self._handlers.get(topic)
         if handler is None:
-            self._on_other(topic, msg)
+            self._on_other(topic, msg, age_s)
             return
         try:
             reading = handler(msg)
@@ -72,7 +75,7 @@ class Dispatcher:
                 "replaced by U+FFFD",
                 what="text repaired, message kept",
             )
-        self._on_reading(topic, reading)
+        self._on_reading(topic, reading, age_s)
 
     def on_unreadable(self, topic: str, reason: str, detail: str) -> None:
         """A message of canonical ``topic`` the input could not decode: received, and

@@ -63,7 +63,10 @@ class Rates:
     def update(self, counters: Mapping[str, float], now: float) -> dict[str, float]:
         if self.at is not None and now > self.at:
             for name, value in counters.items():
-                instant = max(0.0, value - self.previous.get(name, value)) / (now - self.at)
+                # a counter not there at the previous sample was 0 then: the messages
+                # of a topic first heard since then count (a burst of /rosout records
+                # between two heartbeats showed 0.0 Hz for ever)
+                instant = max(0.0, value - self.previous.get(name, 0)) / (now - self.at)
                 old = self.rates.get(name, instant)
                 self.rates[name] = old + RATE_SMOOTHING * (instant - old)
         self.previous, self.at = dict(counters), now

@@ -42,6 +42,7 @@ class Pipeline:
                 self.sampler.tick,
                 self.sampler.period_s,
                 self.dispatcher.on_unreadable,
+                self.builder.extra_due,
             )
         )
 

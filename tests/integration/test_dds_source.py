@@ -104,11 +104,17 @@ def topic_events(events: list[dict]) -> dict[str, dict]:
 
 
 class DdsInput:
-    """The dds input, its builder and sample tick, in this process; events in memory."""
+    """The dds input, its builder, sample tick and graph checks (the input's own loop),
+    in this process; events in memory."""
 
-    def __init__(self, env: dict[str, str], extras: str = "") -> None:
+    def __init__(self, env: dict[str, str], extras: str = "", **settings_env: str) -> None:
         settings = load_settings(
-            env={"SAMPLE_RATE_HZ": "10", "BRIDGE_INPUT": "dds", "TOPICS_EXTRA": extras}
+            env={
+                "SAMPLE_RATE_HZ": "10",
+                "BRIDGE_INPUT": "dds",
+                "TOPICS_EXTRA": extras,
+                **settings_env,
+            }
         ).settings
         self.events: list[dict] = []
         self.source = DdsSource(options.source_options(settings, env))
@@ -118,8 +124,12 @@ class DdsInput:
         self.dispatcher = self.pipeline.dispatcher
         self._stop = threading.Event()
         self.pipeline.open()
-        self._ticker = threading.Thread(target=self.pipeline.tick, args=(self._stop, lambda: None))
-        self._ticker.start()
+        self._loops = [
+            threading.Thread(target=loop, args=(self._stop, lambda: None))
+            for loop in (self.pipeline.tick, self.pipeline.ingest)
+        ]
+        for loop in self._loops:
+            loop.start()
 
     def event_with_every_domain(self, during: Callable[[], None] = lambda: None) -> dict:
         def found() -> dict | None:
@@ -130,7 +140,8 @@ class DdsInput:
 
     def close(self) -> None:
         self._stop.set()
-        self._ticker.join(10)
+        for loop in self._loops:
+            loop.join(10)
         self.source.stop()
 
 
@@ -218,7 +229,7 @@ def test_events_from_a_fast_dds_publisher(tmp_path: Path) -> None:
             pytest.fail(missing)
         pytest.skip(missing)
     ros = ros_env(private_domain(), tmp_path / "ros-logs")
-    robot = Robot("rclpy", ros, tmp_path / "robot.log")
+    robot = Robot("kilted", ros, tmp_path / "robot.log")
     heard = None
     try:
         publishers = {t: robot.publisher(t, kind, qos) for t, (kind, qos, _) in KNOWN.items()}

@@ -5,6 +5,7 @@ namespaces and ROS parameters."""
 from __future__ import annotations
 
 import math
+from datetime import datetime
 
 import pytest
 
@@ -44,6 +45,7 @@ class Graph:
         )
         pipeline.open()
         self.dispatcher = pipeline.dispatcher
+        self.builder = pipeline.builder
         self.executor = self.source.executor
         self.executor.add_node(self.robot)
         # in virtual time the sample tick is a timer of the bridge's node
@@ -56,6 +58,12 @@ class Graph:
         end = self.context.time_source.steady_ns() + int(seconds * 1e9)
         while self.context.time_source.steady_ns() < end:
             self.executor.spin_once(timeout_sec=0.05)
+
+    def run_until(self, steady_s: float) -> None:
+        """Spin until exactly ``steady_s`` of virtual time (timers due before fire)."""
+        end = round(steady_s * 1e9)
+        while (now := self.context.time_source.steady_ns()) < end:
+            self.executor.spin_once(timeout_sec=(end - now) / 1e9)
 
     def received(self, topic: str) -> int:
         return self.dispatcher.received[topic]
@@ -316,3 +324,56 @@ def test_a_state_stream_re_matched_at_the_graph_check_keeps_its_waiting_message(
     replaced, choice, _ = g.subscription("/battery_state")
     assert replaced is not first and choice.reliable
     assert g.events[-1]["power"]["battery"]["voltage_v"] == 21.0
+
+
+def test_a_message_taken_at_the_tick_carries_its_true_age(graph) -> None:
+    """Odometry received 70 ms after a sample tick waits in its subscription until the
+    next tick, 130 ms later: the event says age_s 0.13 (from the reception stamp the
+    middleware gives with the message, as rclpy's take does), not 0.0."""
+    g = graph(SAMPLE_RATE_HZ="5")  # ticks at 0.2, 0.4, ... s of virtual time
+    odometry = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    g.run_until(2.27)
+    published_ns = g.context.time_source.system_ns()
+    odometry.publish(odom(4.5))
+    g.run_until(2.61)
+    first, second = [e for e in g.events if "location" in e]
+    assert [s["age_s"] for s in first["location"]["sources"]] == [0.13]
+    assert [s["age_s"] for s in second["location"]["sources"]] == [0.33]  # not taken again
+    assert g.received("/odom") == 1
+    captured = datetime.fromisoformat(first["captured_at"].replace("Z", "+00:00")).timestamp()
+    assert captured - 0.13 == pytest.approx(published_ns / 1e9, abs=0.001)
+
+
+def test_an_extra_topic_is_taken_at_its_own_rate_not_at_every_tick(graph) -> None:
+    """An extra topic at rate_hz=1 published at 20 Hz into a 5 Hz tick: taken (and so
+    deserialised) once a second, not at every tick; each take is one event."""
+    g = graph(
+        SAMPLE_RATE_HZ="5",
+        TOPICS_EXTRA="/motor/temperature rate_hz=1 type=sensor_msgs/msg/Temperature",
+    )
+    sensor = g.robot.create_publisher(m.Temperature, "/motor/temperature", RELIABLE)
+    g.run_until(2.1)
+    published = 0
+    for step in range(200):  # 10 s at 20 Hz
+        sensor.publish(m.Temperature(temperature=float(step)))
+        published += 1
+        g.run_until(2.1 + (step + 1) * 0.05)
+    events = [e for e in g.events if e["event_type"] == "telemetry.topic"]
+    assert published == 200
+    assert g.received("/motor/temperature") == len(events) == 10
+    assert g.source.topic_stats()["/motor/temperature"]["publishers"] == 1
+    ticks = [e for e in g.events if e["event_type"] == "telemetry.periodic"]
+    assert not ticks  # nothing else publishes: the extra topic alone, at its own rate
+
+
+def test_rosout_records_have_an_age_in_status(graph) -> None:
+    """/rosout is called back, not taken at the tick: its records have a last-seen age
+    as the table's topics do (status showed null)."""
+    g = graph()
+    g.robot.get_logger().warning("starting")  # rcl's /rosout publisher: latched
+    g.run_until(4.1)  # the graph checks have matched it
+    assert g.received("/rosout") == 1
+    g.robot.get_logger().warning("wheel slip")
+    g.run_until(4.6)
+    assert g.received("/rosout") == 2
+    assert g.builder.topic_ages()["/rosout"] == pytest.approx(0.5, abs=0.001)

@@ -1,4 +1,5 @@
-"""The ``rig`` fixture: each test of this folder on the mock and on real rclpy."""
+"""The ``rig`` fixture: each test of this folder on the mock and on real rclpy of
+each ROS 2 distribution (Jazzy, Kilted)."""
 
 from __future__ import annotations
 
@@ -10,19 +11,19 @@ from pathlib import Path
 import pytest
 
 from tests.processes import StubProcess
-from tests.ros.rig import Rig, rclpy_missing
+from tests.ros.rig import DISTROS, Rig, rclpy_missing
 
-FLAVOURS = ("mock", "rclpy")
+FLAVOURS = ("mock", *DISTROS)
 
 
 @functools.cache
-def why_no_rclpy() -> str | None:
-    return rclpy_missing()
+def why_no_rclpy(distro: str = "kilted") -> str | None:
+    return rclpy_missing(distro)
 
 
 @pytest.fixture(params=FLAVOURS)
 def rig(request: pytest.FixtureRequest, tmp_path: Path, stub: StubProcess) -> Iterator[Rig]:
-    if request.param == "rclpy" and (missing := why_no_rclpy()):
+    if request.param != "mock" and (missing := why_no_rclpy(request.param)):
         if os.environ.get("CI"):  # in CI the real thing must run, never skip
             pytest.fail(missing)
         pytest.skip(missing)

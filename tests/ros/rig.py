@@ -2,7 +2,9 @@
 
 The same test bodies run on two graphs:
 
-- ``rclpy``: real rclpy (ROS 2 Kilted wheels, Fast DDS) from ``.venv-ros``, which
+- ``jazzy`` and ``kilted``: real rclpy from the package index, ROS 2 Jazzy (the
+  ``jazzy`` extra: ``ros-jazzy-rclpy[fastrtps]``, rclpy 7.1) in ``.venv-jazzy`` and
+  Kilted (the ``kilted`` extra: rclpy 9.1) in ``.venv-kilted``, both on Fast DDS, which
   ``tools/test.py`` installs. The robot and the bridge are two processes on a private
   ROS domain confined to loopback.
 - ``mock``: the mock rclpy installed as ``rclpy`` in one process that is both the
@@ -26,7 +28,13 @@ from typing import Any
 
 from tests.processes import ROOT, StubProcess, python_env, wait_for
 
-ROS_PYTHON = ROOT / ".venv-ros" / "bin" / "python"
+# real rclpy, by ROS 2 distribution: each in a venv of its own (their wheels conflict)
+ROS_PYTHONS = {
+    "jazzy": ROOT / ".venv-jazzy" / "bin" / "python",
+    "kilted": ROOT / ".venv-kilted" / "bin" / "python",
+}
+DISTROS = tuple(ROS_PYTHONS)
+ROS_PYTHON = ROS_PYTHONS["kilted"]  # where colcon and ament_cmake are (the ros-build extra)
 # every graph of a test session gets a domain of its own: a participant killed by an
 # earlier test lingers in its domain until its lease runs out
 _DOMAINS = iter(random.Random().sample(range(1, 200), 199))
@@ -40,18 +48,19 @@ ROBOT = str(Path(__file__).with_name("robot.py"))
 EVENT_WAIT_S = 60.0
 
 
-def rclpy_missing() -> str | None:
-    """Why real rclpy cannot run here, or None."""
-    if not ROS_PYTHON.exists():
-        return f"no {ROS_PYTHON}: python3 tools/test.py installs the ROS 2 wheels there"
+def rclpy_missing(distro: str = "kilted") -> str | None:
+    """Why real rclpy of ``distro`` cannot run here, or None."""
+    python = ROS_PYTHONS[distro]
+    if not python.exists():
+        return f"no {python}: python3 tools/test.py installs the ROS 2 {distro} wheels there"
     probe = subprocess.run(
-        [str(ROS_PYTHON), "-c", "import rclpy, sensor_msgs.msg, phytrace_edge"],
+        [str(python), "-c", "import rclpy, sensor_msgs.msg, phytrace_edge"],
         capture_output=True,
         text=True,
         timeout=120,
     )
     if probe.returncode != 0:
-        return f"rclpy does not import in {ROS_PYTHON}: {probe.stderr.strip().splitlines()[-1:]}"
+        return f"rclpy does not import in {python}: {probe.stderr.strip().splitlines()[-1:]}"
     return None
 
 
@@ -65,15 +74,14 @@ def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
     }
 
 
-class Robot:
-    """``robot.py`` in a process of its own: real rclpy (``rclpy``) or the mock
-    (``mock``: that process also runs the bridge, when told)."""
+class CommandedProcess:
+    """A script in a process of its own that answers one JSON line per command on its
+    stdin (``robot.py``, ``dds_robot.py``) and prints ``ready`` first."""
 
-    def __init__(self, flavour: str, env: dict[str, str], log: Path) -> None:
-        self.python = str(ROS_PYTHON) if flavour == "rclpy" else sys.executable
+    def __init__(self, command: list[str], env: dict[str, str], log: Path) -> None:
         with log.open("a") as stderr:
             self.process = subprocess.Popen(
-                [self.python, ROBOT, *(["--mock"] if flavour == "mock" else [])],
+                command,
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=stderr,
@@ -97,6 +105,19 @@ class Robot:
         self.process.stdin.flush()  # type: ignore[union-attr]
         return self._answer()
 
+    def close(self) -> None:
+        """End of stdin: the robot leaves the graph cleanly; killed if it does not."""
+        stop_by_pid(self.process, lambda: self.process.stdin.close())  # type: ignore[union-attr]
+
+
+class Robot(CommandedProcess):
+    """``robot.py`` in a process of its own: real rclpy of a distro (``jazzy``,
+    ``kilted``) or the mock (``mock``: that process also runs the bridge, when told)."""
+
+    def __init__(self, flavour: str, env: dict[str, str], log: Path) -> None:
+        self.python = sys.executable if flavour == "mock" else str(ROS_PYTHONS[flavour])
+        super().__init__([self.python, ROBOT, *(["--mock"] if flavour == "mock" else [])], env, log)
+
     def publisher(self, topic: str, type_name: str, qos: str) -> int:
         return int(self.command("publisher", topic=topic, type=type_name, qos=qos))
 
@@ -105,9 +126,8 @@ class Robot:
             self.command("publish", id=publisher, fields=fields, matched_within_s=matched_within_s)
         )
 
-    def close(self) -> None:
-        """End of stdin: the robot leaves the graph cleanly; killed if it does not."""
-        stop_by_pid(self.process, lambda: self.process.stdin.close())  # type: ignore[union-attr]
+    def publish_at(self, publisher: int, fields: dict[str, Any], hz: float, seconds: float) -> int:
+        return int(self.command("publish_at", id=publisher, fields=fields, hz=hz, seconds=seconds))
 
 
 def stop_by_pid(process: subprocess.Popen[Any], ask: Any, grace_s: float = 10) -> None:
@@ -136,6 +156,7 @@ class Rig:
         self.command = self.robot.command
         self.publisher = self.robot.publisher
         self.publish = self.robot.publish
+        self.publish_at = self.robot.publish_at
         self.bridge: subprocess.Popen[bytes] | None = None
 
     def parameters(self, node: str, call: str, answer_s: float = 2.0, **args: Any) -> Any:

@@ -13,6 +13,9 @@ Commands (``op`` and its arguments) -> ``{"ok": true, "result": ...}`` or
     publisher  topic, type, qos ("best_effort", "reliable", "latched")  -> its id
     publish    id, fields (tests.ros.known's form), matched_within_s (optional: wait
                until a subscription matched first)                       -> subscriptions
+    publish_at id, fields, hz, seconds: again and again, as a sensor does -> messages
+    message_info id, fields: one message published and taken back as the bridge takes
+               one (``take_message``)  -> its message info's kinds of value, stamps
     log        level ("info", "warning", "error"), text
     nodes                                                                 -> full names
     parameters node, call ("list", "get", "describe", "set"), names or values,
@@ -70,6 +73,46 @@ class Robot:
             time.sleep(0.01)  # polling the middleware's match count, with a deadline
         publisher.publish(fill(publisher.msg_type(), fields))
         return int(publisher.get_subscription_count())
+
+    def publish_at(self, id: int, fields: dict[str, Any], hz: float, seconds: float) -> int:
+        publisher = self.publishers[id]
+        msg = fill(publisher.msg_type(), fields)
+        start, sent = time.monotonic(), 0
+        while time.monotonic() < start + seconds:
+            publisher.publish(msg)
+            sent += 1
+            time.sleep(max(0.0, start + sent / hz - time.monotonic()))  # the sensor's pace
+        return sent
+
+    def message_info(self, id: int, fields: dict[str, Any]) -> dict[str, Any]:
+        publisher = self.publishers[id]
+        subscription = self.node.create_subscription(
+            publisher.msg_type, publisher.topic_name, lambda msg: None, publisher.qos_profile
+        )
+        deadline = time.monotonic() + DISCOVERY_S
+        try:
+            while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+                time.sleep(0.01)  # polling the middleware's match count, with a deadline
+            before = time.time_ns()
+            publisher.publish(fill(publisher.msg_type(), fields))
+            taken = None
+            while taken is None and time.monotonic() < deadline:
+                with subscription.handle:
+                    taken = subscription.handle.take_message(
+                        subscription.msg_type, subscription.raw
+                    )
+                time.sleep(0 if taken else 0.01)
+            after = time.time_ns()
+        finally:
+            self.node.destroy_subscription(subscription)
+        if taken is None:
+            raise RuntimeError(f"nothing to take on {publisher.topic_name}")
+        info = taken[1]
+        written, received = info["source_timestamp"], info["received_timestamp"]
+        return {
+            "kinds": {key: type(value).__name__ for key, value in info.items()},
+            "written_then_received": before <= written <= received <= after,
+        }
 
     def log(self, level: str, text: str) -> None:
         # one call site per severity: rclpy refuses another severity from the same line

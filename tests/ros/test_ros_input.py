@@ -8,8 +8,12 @@ bridge exits. Where the two graphs disagree, the mock is wrong.
 
 from __future__ import annotations
 
+import copy
 import signal
+import time
+from datetime import datetime
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -95,6 +99,15 @@ def test_rosout_warn_and_above_become_log_records(rig: Rig) -> None:
     records = {(r["level"], r["message"]) for r in rig.events("log.record")}
     assert records == {("warn", "a warning from the robot"), ("error", "a error from the robot")}
     assert {r["logger"] for r in rig.events("log.record")} == {"robot"}
+
+    def rosout_in_status() -> dict[str, Any] | None:  # the heartbeat's: seconds behind
+        rosout = rig.status_json().get("topics", {}).get("/rosout", {})
+        heard = rosout.get("rate_hz", 0) > 0 and rosout.get("last_seen_age_s") is not None
+        return rosout if heard else None
+
+    # it showed 0.0 Hz and no age after records had arrived
+    rosout = wait_for(rosout_in_status, 30, "/rosout's rate and age in status", every=0.5)
+    assert rosout["received"] >= 3 and rosout["records"] == 2
 
 
 def test_an_extra_topic_of_an_installed_type(rig: Rig) -> None:
@@ -191,3 +204,83 @@ def test_a_signal_stops_the_bridge_cleanly(rig: Rig, signum: int) -> None:
     assert code == 0, log
     assert "Traceback" not in log and "Exception" not in log
     assert "event(s) left in the queue" in log
+
+
+def test_a_taken_message_comes_with_its_message_info(rig: Rig) -> None:
+    """What the bridge reads the age of a taken message from: rclpy's ``take_message``
+    gives (message, message info) with the writing and reception stamps on the wall
+    clock (the mock's take gave an empty dict)."""
+    publisher = rig.publisher("/odom", "nav_msgs/msg/Odometry", "reliable")
+    info = rig.command("message_info", id=publisher, fields=KNOWN["/odom"][2])
+    kinds = info["kinds"]
+    assert (kinds["source_timestamp"], kinds["received_timestamp"]) == ("int", "int")
+    assert kinds["publication_sequence_number"] == "int"
+    assert info["written_then_received"] is True
+
+
+def captured_s(event: dict[str, Any]) -> float:
+    return datetime.fromisoformat(event["captured_at"].replace("Z", "+00:00")).timestamp()
+
+
+def test_a_message_taken_at_the_tick_is_as_old_as_its_reception(rig: Rig) -> None:
+    """Odometry is taken at the sample tick (1 Hz here), up to a second after it was
+    received: the first event with each new position says how long ago (the
+    middleware's reception stamp), so ``captured_at - age_s`` is when it was published
+    (it was the tick's own time: ``age_s`` 0.0)."""
+    type_name, _, fields = KNOWN["/odom"]
+    odom = rig.publisher("/odom", type_name, "reliable")  # one message each: none lost
+    rig.start_bridge(SAMPLE_RATE_HZ="1")
+    rig.publish_until(odom, fields, lambda e: "location" in e, "the odometry")
+    wait_for(
+        lambda: (
+            rig.status_json().get("topics", {}).get("/odom", {}).get("qos") == "reliable, volatile"
+        ),
+        30,
+        "the subscription to match the reliable publisher",
+        every=0.5,
+    )
+    for x in (21.5, 22.5, 23.5, 24.5):
+        moved = copy.deepcopy(fields)
+        moved["pose"]["pose"]["position"]["x"] = x
+        before = time.time()
+        rig.publish(odom, moved)
+        after = time.time()
+
+        def taken(e: dict[str, Any], x: float = x) -> bool:
+            return e.get("location", {}).get("local", {}).get("x_m") == x
+
+        rig.wait_event(taken, f"the odometry at x={x}")
+        first = min((e for e in rig.events() if taken(e)), key=captured_s)
+        [source] = [s for s in first["location"]["sources"] if s["topic"] == "/odom"]
+        received_at = captured_s(first) - source["age_s"]
+        assert before - 0.003 <= received_at <= after + 0.1, (before, received_at, after)
+
+
+def test_an_extra_topic_is_taken_at_its_own_rate(rig: Rig) -> None:
+    """An extra topic at rate_hz=1, published at 20 Hz into the 5 Hz sample tick: taken
+    (deserialised) only when due, so each message taken is one event; it was taken at
+    every tick, five messages deserialised for each one sent."""
+    rig.start_bridge(TOPICS_EXTRA="/motor/temperature rate_hz=1")
+    sensor = rig.publisher("/motor/temperature", "sensor_msgs/msg/Temperature", "reliable")
+    fields = {"header": {"frame_id": "motor"}, "temperature": 41.5, "variance": 0.25}
+
+    def figures() -> dict[str, Any]:
+        return rig.status_json().get("topics", {}).get("/motor/temperature", {})
+
+    def matched() -> dict[str, Any] | None:  # the reliable subscription, and a first event
+        rig.publish(sensor, fields)
+        now = figures()
+        return now if now.get("qos") == "reliable, volatile" and now.get("events") else None
+
+    before = wait_for(matched, 60, "the extra topic subscribed and sent", every=0.3)
+    assert rig.publish_at(sensor, fields, hz=20, seconds=4) >= 60
+
+    def counted() -> dict[str, Any] | None:
+        now = figures()
+        return now if now.get("events", 0) >= before["events"] + 3 else None
+
+    after = wait_for(counted, 30, "status to count the events", every=0.5)
+    taken = after["received"] - before["received"]
+    sent = after["events"] - before["events"]
+    # each figure of a heartbeat is read a moment apart: one message either way
+    assert 3 <= sent <= 6 and abs(taken - sent) <= 2, (before, after)

@@ -37,6 +37,7 @@ ROSDEP_KEYS = {
     "tqdm": "python3-tqdm",
     "prometheus-client": "python3-prometheus-client",
     "mcap": None,
+    "cryptography": "python3-cryptography",
 }
 ROS_DEPENDENCIES = {
     "rclpy",
@@ -172,7 +173,7 @@ print(get_package_prefix("phytrace_edge"), phytrace_edge.__file__, len(migration
 def test_the_installed_bridge_runs_on_real_rclpy(installed: Path, tmp_path: Path, stub) -> None:
     """``ros2 run phytrace_edge bridge``, without ros2cli (it has no wheel): the
     installed executable hears a real robot and delivers to the stub."""
-    rig = Rig("rclpy", tmp_path, stub)
+    rig = Rig("kilted", tmp_path, stub)
     try:
         odom = rig.publisher("/odom", *KNOWN["/odom"][:2])
         rig.start_bridge(

@@ -45,18 +45,47 @@ def _ignore_unreadable(topic: str, reason: str, detail: str) -> None:
     """A feed that does not count what its source could not decode."""
 
 
+def always_due(topic: str) -> bool:
+    """A feed with no pace of its own for any topic."""
+    return True
+
+
+class OnMessage(Protocol):
+    """Where a source hands one message of a (canonical) topic, with how long ago it
+    was received when that was not just now (a message taken at the sample tick)."""
+
+    def __call__(self, topic: str, msg: Any, age_s: float = 0.0) -> None: ...
+
+
 @dataclass(frozen=True)
 class Feed:
     """Where a source delivers: each message, and (for sources that keep their own
     time) each sample tick with its ``captured_at`` (None = the wall clock); a tick
     says whether it built an event (False: nothing fresh to report). A message the
     source could not decode goes to ``on_unreadable`` (topic, reason, detail), to be
-    counted with the topic's rejects."""
+    counted with the topic's rejects. ``due`` says whether a ``TOPICS_EXTRA`` topic
+    is due now (its ``rate_hz``): a source that takes messages at the tick takes an
+    extra topic's only then, so a topic sent once a second is not deserialised at
+    every tick."""
 
-    on_message: Callable[[str, Any], None]
+    on_message: OnMessage
     tick: Callable[[float | None], bool]
     sample_period_s: float
     on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable
+    due: Callable[[str], bool] = always_due
+
+
+def age_at_take(received_ns: int, now_ns: int, waited_s: float) -> float:
+    """How old a message taken now is, in seconds: from its reception stamp
+    (``received_ns``, on the same wall clock as ``now_ns``; 0 when the middleware
+    gives none: then 0.0, as if received now). Never more than ``waited_s``, the time
+    since the subscription was last emptied (its previous take, or its creation):
+    a reader that keeps one message cannot hold one from before. That bound also
+    keeps a writer's stamp from another machine's clock (the fallback when the
+    middleware has no reception stamp) from making a fresh message look stale."""
+    if received_ns <= 0:
+        return 0.0
+    return min(max(0.0, (now_ns - received_ns) / 1e9), max(0.0, waited_s))
 
 
 class SourceClock(Protocol):

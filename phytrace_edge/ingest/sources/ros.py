@@ -19,6 +19,7 @@ from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
 from phytrace_edge.ingest.sources.ros_graph import (
     RosApi,
+    Taken,
     TopicSubscriber,
     declare_settings,
     subscribe_topics,
@@ -54,12 +55,12 @@ def load_rclpy(import_module: Callable[[str], ModuleType] = importlib.import_mod
     def subscription_events(on_incompatible: Callable[[Any], None]) -> Any:
         return events.SubscriptionEventCallbacks(incompatible_qos=on_incompatible)
 
-    def take(subscription: Any) -> Any:
+    def take(subscription: Any) -> Taken | None:
         """The newest message waiting on a subscription no executor runs (what the
         executor itself does before it calls a callback), or None."""
         with subscription.handle:
             taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-        return None if taken is None else taken[0]
+        return None if taken is None else Taken(taken[0], received_ns(taken[1]))
 
     def parameter_descriptor(description: str) -> Any:
         descriptor = import_module("rcl_interfaces.msg").ParameterDescriptor
@@ -75,6 +76,14 @@ def load_rclpy(import_module: Callable[[str], ModuleType] = importlib.import_mod
         parameter_descriptor,
         import_module("rclpy.callback_groups").CallbackGroup,
     )
+
+
+def received_ns(info: Mapping[str, Any]) -> int:
+    """When the middleware received a message, from the MessageInfo rclpy's take gives
+    (ns on the system clock): ``received_timestamp`` (Fast DDS fills it in), else the
+    writer's ``source_timestamp`` (rmw_cyclonedds_cpp gives 0 for the reception: Cyclone
+    does not say), else 0, unknown."""
+    return int(info.get("received_timestamp") or info.get("source_timestamp") or 0)
 
 
 def import_error_message(exc: ImportError) -> str:
@@ -140,6 +149,7 @@ class RosSource:
             feed.on_message,
             dict(self._options.qos_overrides),
             take_at_tick=True,
+            due=feed.due,
         )
         self.executor = self._executors.SingleThreadedExecutor()
         self.executor.add_node(self.node)

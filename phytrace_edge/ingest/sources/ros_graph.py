@@ -12,9 +12,10 @@ import threading
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
-from phytrace_edge.ingest.qos import QosChoice, matching_qos
+from phytrace_edge.ingest.qos import QosChoice, before_publishers, incompatible, matching_qos
+from phytrace_edge.ingest.sources.base import OnMessage, age_at_take
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
 
 log = logging.getLogger(__name__)
@@ -22,16 +23,14 @@ log = logging.getLogger(__name__)
 SAMPLED_QUEUE_DEPTH = 5
 EVERY_MESSAGE_QUEUE_DEPTH = 100
 GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
-# Before a topic's publisher is seen, the bridge listens anyway, so that nothing
-# published before the next look at the graph is lost. State streams: best effort,
-# which matches every publisher (their next message comes soon anyway). Topics where
-# every message counts (diagnostics, goals, a task's state, /rosout): reliable, as their
-# publishers are, because only a reliable pair recovers a message published the moment
-# the publisher matched, before the bridge's side had matched it (measured on Fast DDS:
-# 2 of 12 such one-shot ERRORs lost to a best-effort subscription).
-ANY_PUBLISHER = QosChoice(reliable=False, transient_local=False)
-RELIABLE_PUBLISHER = QosChoice(reliable=True, transient_local=False)
-OnMessage = Callable[[str, Any], None]
+
+
+class Taken(NamedTuple):
+    """A message taken from a subscription, and when the middleware received it (ns
+    on the system clock; 0 when it does not say)."""
+
+    message: Any
+    received_ns: int
 
 
 @dataclass(frozen=True)
@@ -43,7 +42,7 @@ class RosApi:
     qos: Any  # the rclpy.qos module: QoSProfile and the policy enums
     clock: Callable[[str], Any]  # "steady" or "system" -> an rclpy Clock
     subscription_events: Callable[[Callable[[Any], None]], Any]  # incompatible-QoS callback
-    take: Callable[[Any], Any]  # a subscription's newest message, or None
+    take: Callable[[Any], Taken | None]  # a subscription's newest message, or None
     # a read-only ParameterDescriptor with this description
     parameter_descriptor: Callable[[str], Any]
     callback_group_base: type  # rclpy.callback_groups.CallbackGroup
@@ -101,6 +100,7 @@ class Wanted:
     types: tuple[str, ...]
     depth: int
     sampled: bool = False  # a state stream: only its latest message counts
+    extra: bool = False  # a TOPICS_EXTRA topic: taken at the tick only when it is due
 
 
 def wanted_topics(
@@ -121,7 +121,7 @@ def wanted_topics(
     }
     for name, (actual, type_name) in (extras or {}).items():
         types = (type_name,) if type_name else ()
-        wanted[name] = Wanted(actual, types, SAMPLED_QUEUE_DEPTH, sampled=True)
+        wanted[name] = Wanted(actual, types, SAMPLED_QUEUE_DEPTH, sampled=True, extra=True)
     return wanted
 
 
@@ -132,13 +132,18 @@ class TopicSubscriber:
     subscriptions sit in a callback group no executor runs (``taken_at_the_tick``), so
     no Python runs for each of their messages.
 
-    ``refresh`` (at start and then periodically) subscribes every topic at once (best
-    effort and volatile while no publisher is known: that matches any), and re-creates
+    ``refresh`` (at start and then periodically) subscribes every topic at once (while
+    no publisher is known: ``qos.before_publishers``), and re-creates
     a subscription when its publishers need another QoS (reliable, transient local: a
     latched goal) or another type; an extra topic with no type given waits for one. A
     per-topic override (TOPIC_QOS) replaces the matching. Incompatible-QoS events are
     counted per topic, and so is a type this machine has no message class for (an
     extra topic's).
+
+    A message taken at the tick carries its age: the middleware's reception stamp
+    (``age_at_take``). An extra topic is taken only when ``due`` says so (its own
+    ``rate_hz``), so a large message sent once a second is not deserialised at
+    every tick.
     """
 
     def __init__(
@@ -149,12 +154,17 @@ class TopicSubscriber:
         on_message: OnMessage,
         overrides: dict[str, QosChoice] | None = None,
         take_at_tick: bool = False,
+        due: Callable[[str], bool] = lambda topic: True,
     ) -> None:
         self._api, self._node, self._topics = api, node, topics
         self._taken_at_tick = taken_at_the_tick(api) if take_at_tick else None
         self._lock = threading.Lock()
         self._on_message = on_message
         self._overrides = overrides or {}
+        self._due = due
+        self._system, self._steady = api.clock("system"), api.clock("steady")
+        # steady seconds when each taken subscription was last emptied (or made)
+        self._emptied_at: dict[str, float] = {}
         self.subscribed: dict[str, tuple[Any, QosChoice, str]] = {}
         self.publishers: dict[str, int] = dict.fromkeys(topics, 0)
         self.qos_incompatible: Counter[str] = Counter()
@@ -163,12 +173,13 @@ class TopicSubscriber:
     def refresh(self) -> None:
         with self._lock:  # the sampler's take_latest uses the same subscriptions
             kept = self._refresh()
-        for canonical, msg in kept:
-            self._on_message(canonical, msg)
+        for canonical, msg, age_s in kept:
+            self._on_message(canonical, msg, age_s)
 
-    def _refresh(self) -> list[tuple[str, Any]]:
-        """Subscribe and re-match; the messages taken from subscriptions it replaced."""
-        kept: list[tuple[str, Any]] = []
+    def _refresh(self) -> list[tuple[str, Any, float]]:
+        """Subscribe and re-match; the messages (and their ages) taken from the
+        subscriptions it replaced."""
+        kept: list[tuple[str, Any, float]] = []
         for canonical, wanted in self._topics.items():
             publishers = [
                 info
@@ -192,12 +203,10 @@ class TopicSubscriber:
                 if self._is_taken(wanted):  # no executor runs its events
                     self._count_incompatible(canonical, choice, offered)
             elif current is None and wanted.types:
-                # nobody seen yet: listen from now on anyway, best effort and volatile,
-                # which matches every publisher, so nothing published before the next
-                # look at the graph is lost (a one-shot diagnostics ERROR)
-                choice = self._overrides.get(canonical) or (
-                    ANY_PUBLISHER if wanted.sampled else RELIABLE_PUBLISHER
-                )
+                # nobody seen yet: listen from now on anyway (``before_publishers``), so
+                # nothing published before the next look at the graph is lost (a
+                # one-shot diagnostics ERROR)
+                choice = self._overrides.get(canonical) or before_publishers(not wanted.sampled)
                 type_name = wanted.types[0]
             else:
                 continue
@@ -213,9 +222,10 @@ class TopicSubscriber:
                 continue
             if current is not None:
                 if self._is_taken(wanted):  # its newest message was not taken yet
-                    waiting = self._api.take(current[0])
-                    kept += [(canonical, waiting)] if waiting is not None else []
+                    waiting = self._take(canonical, current[0])
+                    kept += [(canonical, *waiting)] if waiting is not None else []
                 self._node.destroy_subscription(current[0])
+            self._emptied_at[canonical] = self._steady_s()
             self.subscribed[canonical] = (
                 self._subscribe(canonical, wanted, message_class, choice),
                 choice,
@@ -254,10 +264,7 @@ class TopicSubscriber:
     ) -> None:
         """Publishers the subscription cannot match, read off the graph (a reliable or
         transient-local request meets a best-effort or volatile offer)."""
-        count = sum(
-            (choice.reliable and not reliable) or (choice.transient_local and not latched)
-            for reliable, latched in offered
-        )
+        count = incompatible(choice, offered)
         if count > self.qos_incompatible[canonical]:
             log.warning(
                 "%s: %d publisher(s)' QoS incompatible with the subscription (%s)",
@@ -269,16 +276,35 @@ class TopicSubscriber:
 
     def take_latest(self) -> None:
         """Hand over the newest message of each sampled topic, if one came since the
-        last tick (no executor runs their subscriptions)."""
+        last tick (no executor runs their subscriptions); an extra topic's only when
+        it is due."""
         taken = []
         with self._lock:
             for canonical, wanted in self._topics.items():
                 current = self.subscribed.get(canonical)
-                if current is not None and self._is_taken(wanted):
-                    taken.append((canonical, self._api.take(current[0])))
-        for canonical, msg in taken:
-            if msg is not None:
-                self._on_message(canonical, msg)
+                if current is None or not self._is_taken(wanted):
+                    continue
+                if wanted.extra and not self._due(canonical):
+                    continue  # left in the subscription (keep last 1), not deserialised
+                waiting = self._take(canonical, current[0])
+                if waiting is not None:
+                    taken.append((canonical, *waiting))
+        for canonical, msg, age_s in taken:
+            self._on_message(canonical, msg, age_s)
+
+    def _take(self, canonical: str, subscription: Any) -> tuple[Any, float] | None:
+        """The message waiting on a taken subscription and its age, or None."""
+        now_s = self._steady_s()
+        waited_s = now_s - self._emptied_at.get(canonical, now_s)
+        self._emptied_at[canonical] = now_s
+        taken = self._api.take(subscription)
+        if taken is None:
+            return None
+        now_ns = int(self._system.now().nanoseconds)
+        return taken.message, age_at_take(taken.received_ns, now_ns, waited_s)
+
+    def _steady_s(self) -> float:
+        return float(self._steady.now().nanoseconds) / 1e9
 
     def _is_taken(self, wanted: Wanted) -> bool:
         """Whether this topic is taken at the tick rather than called back."""
@@ -327,10 +353,12 @@ def subscribe_topics(
     on_message: OnMessage,
     overrides: dict[str, QosChoice] | None = None,
     take_at_tick: bool = False,
+    due: Callable[[str], bool] = lambda topic: True,
 ) -> TopicSubscriber:
-    """Subscribe ``node`` to the topics (state streams taken at the tick, if asked),
-    and look again every GRAPH_CHECK_S for publishers that need another QoS."""
-    subscriber = TopicSubscriber(api, node, topics, on_message, overrides, take_at_tick)
+    """Subscribe ``node`` to the topics (state streams taken at the tick, if asked;
+    an extra topic when ``due``), and look again every GRAPH_CHECK_S for publishers
+    that need another QoS."""
+    subscriber = TopicSubscriber(api, node, topics, on_message, overrides, take_at_tick, due)
     subscriber.refresh()
     node.create_timer(GRAPH_CHECK_S, subscriber.refresh, clock=api.clock("steady"))
     return subscriber

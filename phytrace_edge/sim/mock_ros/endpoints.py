@@ -2,11 +2,14 @@
 
 Semantics kept from ROS 2 on DDS (the module ``runtime`` says which and why): a copy
 per matching subscription, QoS compatibility with its event, KEEP_LAST history,
-transient-local replay, discovery that takes time and is not symmetric.
+transient-local replay, discovery that takes time and is not symmetric; and, as
+rclpy's ``take_message`` gives it, the MessageInfo of each message taken (when it was
+written and received, on the system clock of the context's time source).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -49,11 +52,25 @@ def type_name_of(msg_type: type[Message]) -> str:
     return msg_type._type
 
 
+@dataclass(frozen=True)
+class Written:
+    """A message as its publisher wrote it: a copy, when, and its sequence number."""
+
+    msg: Any
+    source_ns: int
+    sequence: int
+
+
+_PUBLISHERS_MADE = itertools.count(1)
+
+
 class Publisher:
     def __init__(self, node: Node, msg_type: type[Message], topic: str, qos: QoSProfile) -> None:
         self.node, self.msg_type, self.topic_name, self.qos_profile = node, msg_type, topic, qos
-        self._history: deque[Any] = deque(maxlen=qos.depth)
+        self._history: deque[Written] = deque(maxlen=qos.depth)
         self.created_ns = node.context.time_source.steady_ns()
+        self.gid = next(_PUBLISHERS_MADE).to_bytes(16, "big")  # rmw's 16-byte gid
+        self._written = 0
 
     def get_subscription_count(self) -> int:
         """Subscriptions matched with this publisher: discovered, of a compatible QoS."""
@@ -85,11 +102,13 @@ class Publisher:
             raise TypeError(f"Expected {self.msg_type.__name__}, got {type(msg).__name__}")
         context = self.node.context
         with context.condition:
+            self._written += 1
+            written = Written(msg, context.time_source.system_ns(), self._written)
             if self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self._history.append(wire_copy(msg))
+                self._history.append(Written(wire_copy(msg), written.source_ns, self._written))
             for subscription in context.subscriptions:
                 if subscription.matches_topic(self) and self._reaches(subscription):
-                    subscription.offer(self, msg)
+                    subscription.offer(self, written)
             context.condition.notify_all()
 
 
@@ -108,7 +127,8 @@ class Subscription:
         self.callback, self.qos_profile = callback, qos
         self.callback_group = callback_group
         self.event_callbacks = event_callbacks or SubscriptionEventCallbacks()
-        self.pending: deque[Any] = deque(
+        # (message, MessageInfo), oldest first
+        self.pending: deque[tuple[Any, dict[str, Any]]] = deque(
             maxlen=qos.depth if qos.history.name == "KEEP_LAST" else None
         )
         self.incompatible = QoSRequestedIncompatibleQoSInfo()
@@ -116,9 +136,9 @@ class Subscription:
         self._incompatible_with: set[int] = set()
         self.created_ns = node.context.time_source.steady_ns()
 
-    def take(self) -> Any:
-        """The oldest message waiting, or None (what rclpy's take_message gives a
-        subscription no executor runs)."""
+    def take(self) -> tuple[Any, dict[str, Any]] | None:
+        """The oldest message waiting and its MessageInfo, or None (what rclpy's
+        take_message gives a subscription no executor runs)."""
         with self.node.context.condition:
             return self.pending.popleft() if self.pending else None
 
@@ -137,21 +157,34 @@ class Subscription:
         return None
 
     def take_message(self, msg_type: type, raw: bool) -> tuple[Any, dict[str, Any]] | None:
-        msg = self.take()
-        return None if msg is None else (msg, {})
+        return self.take()
 
     def matches_topic(self, publisher: Publisher) -> bool:
         return publisher.topic_name == self.topic_name and type_name_of(
             publisher.msg_type
         ) == type_name_of(self.msg_type)
 
-    def offer(self, publisher: Publisher, msg: Any) -> None:
-        """Deliver ``msg`` if QoS allows (caller holds the context condition)."""
+    def offer(self, publisher: Publisher, written: Written) -> None:
+        """Deliver a copy of ``written`` if QoS allows (caller holds the context
+        condition)."""
         policy = incompatible_policy(publisher.qos_profile, self.qos_profile)
         if policy is not None:
             self._note_incompatible(publisher, policy)
             return
-        self.pending.append(wire_copy(msg))
+        self._receive(publisher, written)
+
+    def _receive(self, publisher: Publisher, written: Written) -> None:
+        """Keep a copy of the message with its MessageInfo, as rclpy's take gives it:
+        the keys and the kinds of value of real rclpy on Fast DDS (a reception
+        sequence number it does not give: None)."""
+        info = {
+            "source_timestamp": written.source_ns,
+            "received_timestamp": self.node.context.time_source.system_ns(),
+            "publication_sequence_number": written.sequence,
+            "reception_sequence_number": None,
+            "publisher_gid": {"implementation_identifier": "rmw_mock", "data": publisher.gid},
+        }
+        self.pending.append((wire_copy(written.msg), info))
 
     def _note_incompatible(self, publisher: Publisher, policy: QoSPolicyKind) -> None:
         if id(publisher) in self._incompatible_with:
@@ -172,4 +205,5 @@ class Subscription:
             if policy is not None:
                 self._note_incompatible(publisher, policy)
             elif self.qos_profile.durability.name == "TRANSIENT_LOCAL":
-                self.pending.extend(wire_copy(m) for m in publisher._history)
+                for written in publisher._history:
+                    self._receive(publisher, written)

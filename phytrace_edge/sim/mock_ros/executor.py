@@ -83,7 +83,7 @@ class SingleThreadedExecutor:
             ready = [s for s in subscriptions if s.pending]
             if ready:
                 subscription = ready[next(self._turn) % len(ready)]
-                msg = subscription.pending.popleft()
+                msg, _ = subscription.pending.popleft()  # the callback takes the message only
                 return functools.partial(subscription.callback, msg)
             for service in node.services:
                 if service.pending and self._runs(service):
