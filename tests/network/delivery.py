@@ -63,3 +63,16 @@ def delivered_everything(
     # the stop flushes: what was built is at PhyCloud, not left behind
     assert accounting["queued"] == 0 and accounting["in_memory"] == 0, accounting
     return accounting
+
+
+def running_status(settings: dict[str, str]) -> tuple[int, dict[str, Any]] | None:
+    """``status --json`` once the bridge runs and says how it reaches PhyCloud."""
+    code, document = status_json(**settings)
+    return (code, document) if document.get("running") and document.get("link") else None
+
+
+def unhealthy_naming(settings: dict[str, str], words: str) -> tuple[int, dict[str, Any]] | None:
+    """``status --json`` once it is unhealthy with ``words`` among its problems."""
+    code, document = status_json(**settings)
+    problems = " | ".join(document.get("problems", []))
+    return (code, document) if code == 1 and words in problems else None

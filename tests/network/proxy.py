@@ -15,22 +15,17 @@ import socket
 import ssl
 import threading
 from collections.abc import Mapping
+from typing import TypeVar
 
 HEAD_MAX = 65536
+Server = TypeVar("Server", bound="LoopbackServer")
 
 
-class ConnectProxy:
-    """``with ConnectProxy(routes) as proxy:`` then ``proxy.url``."""
+class LoopbackServer:
+    """Accepts connections on a free 127.0.0.1 port, each served by ``serve`` in a
+    thread of its own, until the ``with`` block ends."""
 
-    def __init__(
-        self, routes: Mapping[str, tuple[str, int]], credentials: tuple[str, str] | None = None
-    ) -> None:
-        self.routes = dict(routes)
-        self.credentials = credentials
-        self.heads: list[bytes] = []  # every request head, as received
-        self.tunnels = 0
-        self.forwarded = 0
-        self.refused = 0
+    def __init__(self) -> None:
         self._stop = threading.Event()
         self._listener = socket.create_server(("127.0.0.1", 0))
         self._listener.settimeout(0.2)
@@ -38,14 +33,7 @@ class ConnectProxy:
         self._threads: list[threading.Thread] = []
         self._lock = threading.Lock()
 
-    @property
-    def url(self) -> str:
-        if self.credentials:
-            user, password = self.credentials
-            return f"http://{user}:{password}@127.0.0.1:{self.port}"
-        return f"http://127.0.0.1:{self.port}"
-
-    def __enter__(self) -> ConnectProxy:
+    def __enter__(self: Server) -> Server:
         self._start(self._accept)
         return self
 
@@ -55,10 +43,8 @@ class ConnectProxy:
             thread.join(10)
         self._listener.close()
 
-    def saw(self, text: str) -> bool:
-        """Whether ``text`` appeared in any request head the proxy read."""
-        with self._lock:
-            return any(text.encode() in head for head in self.heads)
+    def serve(self, client: socket.socket) -> None:
+        raise NotImplementedError
 
     def _start(self, target: object, *args: object) -> None:
         thread = threading.Thread(target=target, args=args, daemon=True)  # type: ignore[arg-type]
@@ -72,9 +58,36 @@ class ConnectProxy:
                 client, _ = self._listener.accept()
             except TimeoutError:
                 continue
-            self._start(self._serve, client)
+            self._start(self.serve, client)
 
-    def _serve(self, client: socket.socket) -> None:
+
+class ConnectProxy(LoopbackServer):
+    """``with ConnectProxy(routes) as proxy:`` then ``proxy.url``."""
+
+    def __init__(
+        self, routes: Mapping[str, tuple[str, int]], credentials: tuple[str, str] | None = None
+    ) -> None:
+        super().__init__()
+        self.routes = dict(routes)
+        self.credentials = credentials
+        self.heads: list[bytes] = []  # every request head, as received
+        self.tunnels = 0
+        self.forwarded = 0
+        self.refused = 0
+
+    @property
+    def url(self) -> str:
+        if self.credentials:
+            user, password = self.credentials
+            return f"http://{user}:{password}@127.0.0.1:{self.port}"
+        return f"http://127.0.0.1:{self.port}"
+
+    def saw(self, text: str) -> bool:
+        """Whether ``text`` appeared in any request head the proxy read."""
+        with self._lock:
+            return any(text.encode() in head for head in self.heads)
+
+    def serve(self, client: socket.socket) -> None:
         client.settimeout(10)
         with client:
             try:

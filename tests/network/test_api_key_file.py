@@ -6,14 +6,12 @@ ends the bridge. Real bridge processes and a real stub that requires the key."""
 from __future__ import annotations
 
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.network.delivery import delivered_everything, start_bridge
-from tests.processes import ROOT, python_env, status_json, wait_for
+from tests.network.delivery import delivered_everything, start_bridge, unhealthy_naming
+from tests.processes import run_cli, status_json, wait_for
 
 OLD_KEY = "phk_live_old_key_AAAAAAAAAAAAAAAA"
 NEW_KEY = "phk_live_new_key_BBBBBBBBBBBBBBBB"
@@ -35,7 +33,7 @@ def test_a_rotated_key_file_is_used_without_a_restart(tmp_path: Path, stub_facto
     bridge, settings = start_bridge(tmp_path, stub.endpoint, PHYCLOUD_API_KEY_FILE=str(path))
     try:
         code, document = wait_for(
-            lambda: _unhealthy_naming(settings, "refuses the API key"), 30, "the refusal"
+            lambda: unhealthy_naming(settings, "refuses the API key"), 30, "the refusal"
         )
         assert f"PHYCLOUD_API_KEY_FILE {path}" in " ".join(document["problems"])
         assert code == 1
@@ -118,18 +116,13 @@ def test_a_bad_key_file_is_one_line_that_never_shows_its_content(
     path = tmp_path / "api_key"
     if content is not None:
         path.write_text(content)
-    done = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "run"],
-        capture_output=True,
-        text=True,
+    done = run_cli(
+        "run",
         timeout=60,
-        cwd=ROOT,
-        env=python_env(
-            BRIDGE_INPUT="sim",
-            QUEUE_PATH=str(tmp_path / "queue.db"),
-            PHYCLOUD_API_KEY_FILE=str(path),
-            **extra,
-        ),
+        BRIDGE_INPUT="sim",
+        QUEUE_PATH=str(tmp_path / "queue.db"),
+        PHYCLOUD_API_KEY_FILE=str(path),
+        **extra,
     )
     assert done.returncode == 2, done.stderr
     lines = [line for line in done.stderr.splitlines() if line.strip()]
@@ -142,22 +135,9 @@ def test_the_key_file_is_a_setting_of_the_config_file(tmp_path: Path) -> None:
     path = key_file(tmp_path, NEW_KEY)
     config = tmp_path / "bridge.toml"
     config.write_text(f'phycloud_api_key_file = "{path}"\n')
-    done = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "config", "--config", str(config)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=ROOT,
-        env=python_env(),
-    )
+    done = run_cli("config", "--config", str(config), timeout=60)
     assert done.returncode == 0, done.stderr
     assert str(path) in done.stdout and NEW_KEY not in done.stdout
-
-
-def _unhealthy_naming(settings: dict[str, str], words: str) -> tuple[int, dict] | None:
-    code, document = status_json(**settings)
-    problems = " | ".join(document.get("problems", []))
-    return (code, document) if code == 1 and words in problems else None
 
 
 def test_a_config_file_holding_the_key_readable_by_others_gets_a_warning(
@@ -167,14 +147,7 @@ def test_a_config_file_holding_the_key_readable_by_others_gets_a_warning(
     config.write_text(f'phycloud_api_key = "{NEW_KEY}"\n')
     for mode, warned in ((0o644, True), (0o600, False)):
         config.chmod(mode)
-        done = subprocess.run(
-            [sys.executable, "-m", "phytrace_edge", "config", "--config", str(config)],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            cwd=ROOT,
-            env=python_env(),
-        )
+        done = run_cli("config", "--config", str(config), timeout=60)
         assert done.returncode == 0, done.stderr
         assert ("is readable by other users (mode 0644)" in done.stderr) is warned
         assert NEW_KEY not in done.stderr + done.stdout

@@ -17,7 +17,11 @@ from phytrace_edge.redact import Secret
 from phytrace_edge.ship.proxy import bypassed, proxy_for
 from phytrace_edge.ship.tls import TlsOptions
 from phytrace_edge.ship.transport import HttpTransport
-from tests.network.delivery import delivered_everything, start_bridge
+from tests.network.delivery import (
+    delivered_everything,
+    running_status,
+    start_bridge,
+)
 from tests.network.pki import CertificateAuthority
 from tests.network.proxy import ConnectProxy
 from tests.processes import StubProcess, run_cli, status_json, wait_for
@@ -72,7 +76,7 @@ def test_a_bridge_behind_a_connect_proxy_delivers_every_event_and_never_shows_it
         )
         try:
             _, document = wait_for(
-                lambda: _running_status(settings), 60, "the bridge's first heartbeat"
+                lambda: running_status(settings), 60, "the bridge's first heartbeat"
             )
             assert document["link"]["proxy"] == f"http://robot:***@127.0.0.1:{proxy.port}"
             delivered_everything(bridge, settings, https_stub)
@@ -231,11 +235,6 @@ def test_the_setting_overrides_the_environment() -> None:
 )
 def test_no_proxy_matching(host: str, no_proxy: str, expected: bool) -> None:
     assert bypassed(host, no_proxy) is expected
-
-
-def _running_status(settings: dict[str, str]) -> tuple[int, dict] | None:
-    code, document = status_json(**settings)
-    return (code, document) if document.get("running") and document.get("link") else None
 
 
 def _with_warning(settings: dict[str, str], word: str) -> tuple[int, dict] | None:

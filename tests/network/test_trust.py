@@ -21,10 +21,15 @@ from phytrace_edge.redact import Secret
 from phytrace_edge.ship import tls
 from phytrace_edge.ship.tls import ClientCertificate, TlsOptions
 from phytrace_edge.ship.transport import HttpTransport
-from tests.network.delivery import delivered_everything, start_bridge
+from tests.network.delivery import (
+    delivered_everything,
+    running_status,
+    start_bridge,
+    unhealthy_naming,
+)
 from tests.network.gateway import MutualTlsGateway
 from tests.network.pki import CertificateAuthority
-from tests.processes import ROOT, StubProcess, python_env, status_json, wait_for
+from tests.processes import StubProcess, python_env, run_cli, wait_for
 
 BODY, HEADERS = b'{"events": []}', {"Content-Type": "application/json"}
 KEY = "phk_live_tls_test_key_0123456789"
@@ -172,7 +177,7 @@ def test_a_tls_failure_makes_status_unhealthy_at_once_and_keeps_the_events(
     bridge, settings = start_bridge(tmp_path, stub.endpoint, PHYCLOUD_API_KEY=KEY)
     try:
         code, document = wait_for(
-            lambda: _unhealthy_naming(settings, "does not trust"), 30, "status naming TLS"
+            lambda: unhealthy_naming(settings, "does not trust"), 30, "status naming TLS"
         )
         assert code == 1
         assert document["queue"]["depth"] > 0  # kept, not dropped
@@ -207,7 +212,7 @@ def test_mutual_tls_delivers_every_event_with_the_robots_certificate(
         CLIENT_KEY=str(robot.key),
     )
     try:
-        _, document = wait_for(lambda: _running(settings), 60, "a heartbeat")
+        _, document = wait_for(lambda: running_status(settings), 60, "a heartbeat")
         link = document["link"]
         assert link["client_cert"] == str(robot.cert)
         assert 9 * 86400 < link["client_cert_expires_in_s"] <= 10 * 86400
@@ -295,19 +300,14 @@ def test_a_wrong_client_certificate_is_a_one_line_error_at_start(
         key = str(other.key)
     else:
         Path(key).write_text("not a key\n")
-    done = subprocess.run(
-        [sys.executable, "-m", "phytrace_edge", "run"],
-        capture_output=True,
-        text=True,
+    done = run_cli(
+        "run",
         timeout=60,
-        cwd=ROOT,
-        env=python_env(
-            BRIDGE_INPUT="sim",
-            QUEUE_PATH=str(tmp_path / "queue.db"),
-            PHYCLOUD_ENDPOINT="https://127.0.0.1:9/api/v1",
-            CLIENT_CERT=cert,
-            CLIENT_KEY=key,
-        ),
+        BRIDGE_INPUT="sim",
+        QUEUE_PATH=str(tmp_path / "queue.db"),
+        PHYCLOUD_ENDPOINT="https://127.0.0.1:9/api/v1",
+        CLIENT_CERT=cert,
+        CLIENT_KEY=key,
     )
     assert done.returncode == 2, done.stderr
     lines = [line for line in done.stderr.splitlines() if line.strip()]
@@ -327,14 +327,3 @@ def _hashed_dir(tmp_path: Path, ca: CertificateAuthority) -> Path:
     shutil.copy(ca.pem, folder / "company.pem")
     subprocess.run(["openssl", "rehash", str(folder)], check=True, timeout=60)
     return folder
-
-
-def _running(settings: dict[str, str]) -> tuple[int, dict] | None:
-    code, document = status_json(**settings)
-    return (code, document) if document.get("running") and document.get("link") else None
-
-
-def _unhealthy_naming(settings: dict[str, str], words: str) -> tuple[int, dict] | None:
-    code, document = status_json(**settings)
-    problems = " | ".join(document.get("problems", []))
-    return (code, document) if code == 1 and words in problems else None
