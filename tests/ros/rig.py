@@ -78,7 +78,10 @@ class CommandedProcess:
     """A script in a process of its own that answers one JSON line per command on its
     stdin (``robot.py``, ``dds_robot.py``) and prints ``ready`` first."""
 
-    def __init__(self, command: list[str], env: dict[str, str], log: Path) -> None:
+    def __init__(
+        self, command: list[str], env: dict[str, str], log: Path, uid: int | None = None
+    ) -> None:
+        as_user: dict[str, Any] = {} if uid is None else {"user": uid, "group": uid}
         with log.open("a") as stderr:
             self.process = subprocess.Popen(
                 command,
@@ -87,6 +90,7 @@ class CommandedProcess:
                 stderr=stderr,
                 text=True,
                 env=python_env(**env),
+                **as_user,
             )
         self.log = log
         assert self._answer() == "ready"
@@ -112,11 +116,15 @@ class CommandedProcess:
 
 class Robot(CommandedProcess):
     """``robot.py`` in a process of its own: real rclpy of a distro (``jazzy``,
-    ``kilted``) or the mock (``mock``: that process also runs the bridge, when told)."""
+    ``kilted``) or the mock (``mock``: that process also runs the bridge, when told),
+    as this user or as ``uid``."""
 
-    def __init__(self, flavour: str, env: dict[str, str], log: Path) -> None:
+    def __init__(
+        self, flavour: str, env: dict[str, str], log: Path, uid: int | None = None
+    ) -> None:
         self.python = sys.executable if flavour == "mock" else str(ROS_PYTHONS[flavour])
-        super().__init__([self.python, ROBOT, *(["--mock"] if flavour == "mock" else [])], env, log)
+        argv = [self.python, ROBOT, *(["--mock"] if flavour == "mock" else [])]
+        super().__init__(argv, env, log, uid)
 
     def publisher(self, topic: str, type_name: str, qos: str) -> int:
         return int(self.command("publisher", topic=topic, type=type_name, qos=qos))
