@@ -1,5 +1,6 @@
 """The ``rig`` fixture: each test of this folder on the mock and on real rclpy of
-each ROS 2 distribution (Jazzy, Kilted)."""
+each ROS 2 distribution (Jazzy, Kilted; Humble when PHYTRACE_ROS_HUMBLE_SETUP names a
+build of it: see rig.py)."""
 
 from __future__ import annotations
 

@@ -1,12 +1,19 @@
 """A ROS graph for the tests: a robot node, the bridge's ``ros`` input, the stub.
 
-The same test bodies run on two graphs:
+The same test bodies run on these graphs:
 
 - ``jazzy`` and ``kilted``: real rclpy from the package index, ROS 2 Jazzy (the
   ``jazzy`` extra: ``ros-jazzy-rclpy[fastrtps]``, rclpy 7.1) in ``.venv-jazzy`` and
   Kilted (the ``kilted`` extra: rclpy 9.1) in ``.venv-kilted``, both on Fast DDS, which
   ``tools/test.py`` installs. The robot and the bridge are two processes on a private
   ROS domain confined to loopback.
+- ``humble`` (optional): ROS 2 Humble has no wheels; a build of it (from source, or
+  /opt/ros/humble) is tested only when ``PHYTRACE_ROS_HUMBLE_SETUP`` names its
+  ``setup.bash``: the robot and the bridge run with the environment it sets, on
+  ``PHYTRACE_ROS_HUMBLE_PYTHON`` (default: ``python3`` on the PATH it sets; it needs
+  the project's dependencies, the checkout is on PYTHONPATH), on
+  ``PHYTRACE_ROS_HUMBLE_RMW`` (default: rmw_cyclonedds_cpp) with ROS_LOCALHOST_ONLY
+  (Humble has no discovery range). Unset, there is no ``humble`` flavour at all.
 - ``mock``: the mock rclpy installed as ``rclpy`` in one process that is both the
   robot and, once started, the bridge (the mock's graph lives in one process).
 
@@ -17,9 +24,11 @@ stub, ``status``, the exit code and the log.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -33,6 +42,39 @@ ROS_PYTHONS = {
     "jazzy": ROOT / ".venv-jazzy" / "bin" / "python",
     "kilted": ROOT / ".venv-kilted" / "bin" / "python",
 }
+# ROS 2 Humble, from a build of it: only when PHYTRACE_ROS_HUMBLE_SETUP names one
+HUMBLE_SETUP = os.environ.get("PHYTRACE_ROS_HUMBLE_SETUP", "")
+# the RMW (a source build on Debian's Cyclone DDS has this one; Humble's default and
+# the other flavours': rmw_fastrtps_cpp)
+HUMBLE_RMW = os.environ.get("PHYTRACE_ROS_HUMBLE_RMW", "rmw_cyclonedds_cpp")
+
+
+@functools.cache
+def sourced(setup: str) -> dict[str, str]:
+    """The variables ``source SETUP`` sets or changes in bash, the checkout first on
+    the Python path (as ``python_env`` puts it for the other flavours)."""
+    dump = subprocess.run(
+        ["bash", "-c", 'source "$1" >&2 && env -0', "bash", setup],
+        capture_output=True,
+        timeout=60,
+    ).stdout.decode()
+    env = dict(item.split("=", 1) for item in dump.split("\0") if "=" in item)
+    changed = {
+        k: v
+        for k, v in env.items()
+        if os.environ.get(k) != v and k not in ("_", "SHLVL", "PWD", "OLDPWD")
+    }
+    return changed | {
+        "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    }
+
+
+if HUMBLE_SETUP:
+    ROS_PYTHONS["humble"] = Path(
+        os.environ.get("PHYTRACE_ROS_HUMBLE_PYTHON")
+        or shutil.which("python3", path=sourced(HUMBLE_SETUP).get("PATH"))
+        or "python3"
+    )
 DISTROS = tuple(ROS_PYTHONS)
 ROS_PYTHON = ROS_PYTHONS["kilted"]  # where colcon and ament_cmake are (the ros-build extra)
 # every graph of a test session gets a domain of its own: a participant killed by an
@@ -51,21 +93,31 @@ EVENT_WAIT_S = 60.0
 def rclpy_missing(distro: str = "kilted") -> str | None:
     """Why real rclpy of ``distro`` cannot run here, or None."""
     python = ROS_PYTHONS[distro]
+    if distro == "humble" and not Path(HUMBLE_SETUP).is_file():
+        return f"no {HUMBLE_SETUP} (PHYTRACE_ROS_HUMBLE_SETUP): a Humble build's setup.bash"
     if not python.exists():
         return f"no {python}: python3 tools/test.py installs the ROS 2 {distro} wheels there"
-    probe = subprocess.run(
-        [str(python), "-c", "import rclpy, sensor_msgs.msg, phytrace_edge"],
+    probe = subprocess.run(  # the bridge's service: its dependencies too
+        [str(python), "-c", "import rclpy, sensor_msgs.msg, phytrace_edge.runtime.service"],
         capture_output=True,
         text=True,
         timeout=120,
+        env=os.environ | (sourced(HUMBLE_SETUP) if distro == "humble" else {}),
     )
     if probe.returncode != 0:
         return f"rclpy does not import in {python}: {probe.stderr.strip().splitlines()[-1:]}"
     return None
 
 
-def ros_env(domain: int, log_dir: Path) -> dict[str, str]:
+def ros_env(domain: int, log_dir: Path, distro: str = "kilted") -> dict[str, str]:
     """A private ROS domain on loopback only (no discovery traffic leaves the host)."""
+    if distro == "humble":  # before Iron: no discovery range; the build's environment
+        return sourced(HUMBLE_SETUP) | {
+            "ROS_DOMAIN_ID": str(domain),
+            "ROS_LOCALHOST_ONLY": "1",
+            "RMW_IMPLEMENTATION": HUMBLE_RMW,
+            "ROS_LOG_DIR": str(log_dir),
+        }
     return {
         "ROS_DOMAIN_ID": str(domain),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
@@ -89,7 +141,7 @@ class CommandedProcess:
                 stdout=subprocess.PIPE,
                 stderr=stderr,
                 text=True,
-                env=python_env(**env),
+                env=python_env() | env,  # env may set PYTHONPATH (a sourced build)
                 **as_user,
             )
         self.log = log
@@ -116,8 +168,8 @@ class CommandedProcess:
 
 class Robot(CommandedProcess):
     """``robot.py`` in a process of its own: real rclpy of a distro (``jazzy``,
-    ``kilted``) or the mock (``mock``: that process also runs the bridge, when told),
-    as this user or as ``uid``."""
+    ``kilted``, ``humble``) or the mock (``mock``: that process also runs the bridge,
+    when told), as this user or as ``uid``."""
 
     def __init__(
         self, flavour: str, env: dict[str, str], log: Path, uid: int | None = None
@@ -156,7 +208,7 @@ class Rig:
         self.flavour, self.tmp, self.stub = flavour, tmp, stub
         self.queue_path = tmp / "queue.db"
         self.bridge_log = tmp / "bridge.log"
-        self.env = ros_env(private_domain(), tmp / "ros-logs")
+        self.env = ros_env(private_domain(), tmp / "ros-logs", flavour)
         self.settings: dict[str, str] = {}
         # on the mock, the robot's process becomes the bridge: one log
         robot_log = self.bridge_log if flavour == "mock" else tmp / "robot.log"

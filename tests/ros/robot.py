@@ -111,7 +111,9 @@ class Robot:
         written, received = info["source_timestamp"], info["received_timestamp"]
         return {
             "kinds": {key: type(value).__name__ for key, value in info.items()},
-            "written_then_received": before <= written <= received <= after,
+            # no reception stamp (0): the writer's, as ros.received_ns takes it then
+            "written_then_received": before <= written <= (received or written) <= after,
+            "reception_stamped": received != 0,
         }
 
     def log(self, level: str, text: str) -> None:
@@ -132,9 +134,13 @@ class Robot:
 
     def parameters(self, node: str, call: str, answer_s: float, **args: Any) -> Any:
         from rclpy.parameter import Parameter, parameter_value_to_python
-        from rclpy.parameter_client import AsyncParameterClient
 
-        client = AsyncParameterClient(self.node, node)
+        try:
+            from rclpy.parameter_client import AsyncParameterClient  # Iron and later
+        except ImportError:  # Humble
+            client: Any = ParameterServices(self.node, node)
+        else:
+            client = AsyncParameterClient(self.node, node)
         if not client.wait_for_services(timeout_sec=DISCOVERY_S):
             raise RuntimeError(f"{node} offers no parameter services")
         if call == "list":
@@ -163,6 +169,47 @@ class Robot:
                 for d in response.descriptors
             }
         return [{"successful": r.successful, "reason": r.reason} for r in response.results]
+
+
+class ParameterServices:
+    """What ``rclpy.parameter_client.AsyncParameterClient`` (Iron and later) does for
+    the robot, on Humble: a client of each of a node's parameter services."""
+
+    def __init__(self, node: Any, remote: str) -> None:
+        from rcl_interfaces import srv
+
+        self.clients = {
+            name: node.create_client(service, f"{remote}/{name}")
+            for name, service in (
+                ("list_parameters", srv.ListParameters),
+                ("get_parameters", srv.GetParameters),
+                ("describe_parameters", srv.DescribeParameters),
+                ("set_parameters", srv.SetParameters),
+            )
+        }
+
+    def wait_for_services(self, timeout_sec: float) -> bool:
+        deadline = time.monotonic() + timeout_sec
+        return all(
+            client.wait_for_service(timeout_sec=max(0.0, deadline - time.monotonic()))
+            for client in self.clients.values()
+        )
+
+    def _call(self, service: str, **fields: Any) -> Any:
+        client = self.clients[service]
+        return client.call_async(client.srv_type.Request(**fields))
+
+    def list_parameters(self) -> Any:
+        return self._call("list_parameters")
+
+    def get_parameters(self, names: list[str]) -> Any:
+        return self._call("get_parameters", names=names)
+
+    def describe_parameters(self, names: list[str]) -> Any:
+        return self._call("describe_parameters", names=names)
+
+    def set_parameters(self, parameters: list[Any]) -> Any:
+        return self._call("set_parameters", parameters=[p.to_parameter_msg() for p in parameters])
 
 
 def serve(robot: Robot, out: Any, bridge: queue.Queue[list[str] | None], mock: bool) -> None:
