@@ -9,7 +9,8 @@ request, not each read (httpx's timeouts are per operation, so a server that tri
 one byte every few seconds would otherwise hold a request for hours), and at most
 ``MAX_REPLY_BYTES`` of any answer are read (a multi-GB body must not reach memory).
 The deadline lives in the network streams httpcore reads from and writes to: each
-operation gets the time left, never more.
+operation gets the time left, never more. httpx has no setting for its pool's backend,
+so ``BoundedTransport`` does its transport's work on this one, with public APIs only.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ import logging
 import ssl
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any, Protocol
 from urllib.parse import urlsplit
 
@@ -122,38 +124,91 @@ class DeadlineBackend(httpcore.NetworkBackend):
         self._backend.sleep(seconds)
 
 
-def _bounded_transport(
-    ssl_context: ssl.SSLContext | None, deadline: Deadline, proxy: str | None
-) -> httpx.HTTPTransport:
-    """httpx's transport whose connection pool (direct, or through ``proxy``) runs on
-    the deadline backend (httpx has no setting for the backend, so its pool is made
-    again with the same defaults)."""
-    transport = httpx.HTTPTransport(verify=ssl_context or False, trust_env=False)
-    limits = httpx.Limits()
-    pool_options: dict[str, Any] = {
-        "ssl_context": ssl_context,
-        "max_connections": limits.max_connections,
-        "max_keepalive_connections": limits.max_keepalive_connections,
-        "keepalive_expiry": limits.keepalive_expiry,
-        "network_backend": DeadlineBackend(deadline),
-    }
-    if proxy is None:
-        transport._pool = httpcore.ConnectionPool(**pool_options)
-    else:  # CONNECT for https: the proxy relays bytes it cannot read
-        parsed = httpx.Proxy(proxy)
-        transport._pool = httpcore.HTTPProxy(
-            proxy_url=httpcore.URL(
-                scheme=parsed.url.raw_scheme,
-                host=parsed.url.raw_host,
-                port=parsed.url.port,
-                target=parsed.url.raw_path,
-            ),
+# httpcore's errors -> httpx's same-named public ones (which _post catches); subclasses first
+_HTTPX_ERRORS: tuple[tuple[type[Exception], type[httpx.TransportError]], ...] = (
+    (httpcore.ConnectTimeout, httpx.ConnectTimeout),
+    (httpcore.ReadTimeout, httpx.ReadTimeout),
+    (httpcore.WriteTimeout, httpx.WriteTimeout),
+    (httpcore.PoolTimeout, httpx.PoolTimeout),
+    (httpcore.TimeoutException, httpx.TimeoutException),
+    (httpcore.ConnectError, httpx.ConnectError),
+    (httpcore.ReadError, httpx.ReadError),
+    (httpcore.WriteError, httpx.WriteError),
+    (httpcore.NetworkError, httpx.NetworkError),
+    (httpcore.ProxyError, httpx.ProxyError),
+    (httpcore.UnsupportedProtocol, httpx.UnsupportedProtocol),
+    (httpcore.LocalProtocolError, httpx.LocalProtocolError),
+    (httpcore.RemoteProtocolError, httpx.RemoteProtocolError),
+    (httpcore.ProtocolError, httpx.ProtocolError),
+)
+
+
+@contextmanager
+def _as_httpx_errors() -> Iterator[None]:
+    try:
+        yield
+    except Exception as exc:
+        for theirs, ours in _HTTPX_ERRORS:
+            if isinstance(exc, theirs):
+                raise ours(str(exc)) from exc  # tls.handshake_failure reads the chain
+        raise  # not httpcore's: as it is
+
+
+def _core_url(u: httpx.URL) -> httpcore.URL:
+    return httpcore.URL(scheme=u.raw_scheme, host=u.raw_host, port=u.port, target=u.raw_path)
+
+
+class _Body(httpx.SyncByteStream):
+    """httpcore's answer body, its errors made httpx's (a trickle is cut off here)."""
+
+    def __init__(self, body: Iterable[bytes]) -> None:
+        self._body = body
+
+    def __iter__(self) -> Iterator[bytes]:
+        with _as_httpx_errors():
+            yield from self._body
+
+    def close(self) -> None:
+        getattr(self._body, "close", lambda: None)()  # httpcore's has one; typed Iterable
+
+
+class BoundedTransport(httpx.BaseTransport):
+    """httpcore's pool, direct or through ``proxy``, on the deadline backend."""
+
+    def __init__(self, ctx: ssl.SSLContext | None, deadline: Deadline, proxy: str | None) -> None:
+        limits = httpx.Limits()  # httpx's defaults; nothing is read from the environment
+        options: dict[str, Any] = {
+            "ssl_context": ctx,  # None: an http endpoint, which never needs one
+            "max_connections": limits.max_connections,
+            "max_keepalive_connections": limits.max_keepalive_connections,
+            "keepalive_expiry": limits.keepalive_expiry,
+            "network_backend": DeadlineBackend(deadline),
+        }
+        if proxy is None:
+            self._connections = httpcore.ConnectionPool(**options)
+            return
+        parsed = httpx.Proxy(proxy)  # CONNECT for https: the proxy relays bytes it cannot read
+        self._connections = httpcore.HTTPProxy(
+            proxy_url=_core_url(parsed.url),  # httpx.Proxy took the credentials out of it
             proxy_auth=parsed.raw_auth,
             proxy_headers=parsed.headers.raw,
             proxy_ssl_context=tls.context(TlsOptions()) if parsed.url.scheme == "https" else None,
-            **pool_options,
+            **options,
         )
-    return transport
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        url, headers, body = _core_url(request.url), request.headers.raw, request.stream
+        sent = httpcore.Request(  # the client's timeouts ride in the extensions
+            request.method, url, headers=headers, content=body, extensions=request.extensions
+        )
+        with _as_httpx_errors():
+            answer = self._connections.handle_request(sent)
+        assert isinstance(answer.stream, Iterable)  # a sync pool's body
+        stream, ext = _Body(answer.stream), answer.extensions
+        return httpx.Response(answer.status, headers=answer.headers, stream=stream, extensions=ext)
+
+    def close(self) -> None:
+        self._connections.close()
 
 
 class HttpTransport:
@@ -189,7 +244,7 @@ class HttpTransport:
         self._deadline = Deadline()
         self._client = httpx.Client(
             timeout=httpx.Timeout(timeout_s),
-            transport=_bounded_transport(
+            transport=BoundedTransport(
                 tls.context(options) if https else None, self._deadline, proxy
             ),
             follow_redirects=False,
