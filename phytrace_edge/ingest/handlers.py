@@ -231,7 +231,8 @@ def handle_imu(msg: Any) -> ImuReading:
 def handle_twist(msg: Any) -> TwistReading:
     """``geometry_msgs/Twist`` (or ``TwistStamped``) on /cmd_vel -> commanded velocity.
 
-    ``angular_z_rps`` is in rad/s, as the reference event names it.
+    ``angular_z_rps`` is in rad/s, as the reference event names it
+    (tests/data/reference_event.json).
     """
     twist = getattr(msg, "twist", msg)
     linear = getattr(twist, "linear", None)

@@ -4,7 +4,8 @@ Readings are already in UDM units and shapes (docs/udm.md). Every key is optiona
 a handler leaves out what a message does not carry (unset, NaN, out of range), so a
 reader uses ``.get``. The builder reads these names and mypy checks them: a key
 renamed here and not there fails the type check, not production; a handler that
-writes a key not declared here fails ``tests/unit/test_readings.py``.
+writes a key not declared here fails ``tests/unit/test_topic_table.py``
+(``test_a_handler_writes_only_what_its_reading_declares``).
 
 ``Readings`` is the latest reading of every table topic by topic name, the form the
 event is assembled from (``builder/assemble.py``).

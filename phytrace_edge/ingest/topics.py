@@ -1,8 +1,9 @@
-"""The topic table: the ten ROS 2 topics of the reference guide and ``/rosout``, each
-with its type, handler, UDM domains and how it is heard; and ``ExtraTopic``, an entry
-of ``TOPICS_EXTRA`` (any other topic). Adding a topic is one row here, its handler,
-its reading in ``readings.py`` and, for a new domain, that domain's builder in
-``builder/assemble.py``; README's topic table is checked against this one.
+"""The topic table: the ten ROS 2 topics of the product's original description (the
+README's topic table) and ``/rosout``, each with its type, handler, UDM domains and how
+it is heard; and ``ExtraTopic``, an entry of ``TOPICS_EXTRA`` (any other topic).
+Adding a topic is one row here, its handler, its reading in ``readings.py`` and, for a
+new domain, that domain's builder in ``builder/assemble.py``; README's topic table is
+checked against this one.
 
 Two flags say how a topic's messages are treated:
 

@@ -17,7 +17,8 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 
-# the reference guide's launch parameters, with their defaults ("" = not set)
+# the launch parameters of the product's original description (docs/ros2.md, "Launch
+# files"), with their defaults ("" = not set)
 ARGUMENTS = {
     "phycloud_endpoint": ("", "PhyCloud ingestion API base URL"),
     "phycloud_api_key": ("", "API key (prefer the PHYCLOUD_API_KEY environment variable)"),
@@ -57,9 +58,10 @@ def bridge_command(bridge_input: str, values: dict) -> list:
 
 def bridge_environment(environment: dict) -> dict:
     """The bridge's environment: launch's own, less ``WATCHDOG_PID``. Under systemd
-    (``systemd/phytrace-edge-ros2.service``) ``ros2 launch`` is the main process, so
-    systemd names it there; the bridge, which alone knows whether it makes progress,
-    takes the watchdog over (the unit's ``NotifyAccess=all`` accepts its pings)."""
+    with the drop-in ``systemd/phytrace-edge.service.d/ros2-launch.conf.example``,
+    ``ros2 launch`` is the main process, so systemd names it there; the bridge, which
+    alone knows whether it makes progress, takes the watchdog over (the drop-in's
+    ``NotifyAccess=all`` accepts its pings)."""
     return {name: value for name, value in environment.items() if name != "WATCHDOG_PID"}
 
 

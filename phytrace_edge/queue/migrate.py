@@ -1,7 +1,8 @@
 """Schema migrations: numbered SQL files applied in order, tracked by ``user_version``.
 
-The files live in the repository's ``migrations/`` folder and are packaged into the
-wheel as ``phytrace_edge/queue/migrations``. A database at version N gets files N+1...
+The files live in the repository's ``migrations/`` folder; the wheel carries them in a
+``migrations`` folder beside this module (``force-include`` in pyproject.toml). A
+database at version N gets files N+1...
 applied, each in its own transaction, so an upgrade interrupted by a crash resumes.
 """
 

@@ -5,6 +5,7 @@ services on one file."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sqlite3
@@ -171,8 +172,9 @@ def test_status_reads_a_queue_on_a_read_only_volume(
         store.put_many([{"event_id": f"e{i}"} for i in range(7)])
     place = read_only_mount(source)
     result = run_cli("status", "--json", timeout=60, QUEUE_PATH=str(place / "queue.db"))
-    assert '"depth": 7' in result.stdout, result.stderr
-    assert result.returncode == 3  # not running, and readable
+    assert result.returncode == 3, result.stderr  # not running, and readable
+    queue = json.loads(result.stdout)["queue"]
+    assert (queue["path"], queue["depth"]) == (str(place / "queue.db"), 7)
 
 
 ReadOnlyMount = Callable[[Path], Path]

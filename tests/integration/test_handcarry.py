@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -16,6 +17,7 @@ from mcap.reader import make_reader
 
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.export import BATCH_EVENTS, open_handcarry
+from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
 from tests.udm_events import EVENT_TYPES, every_type
@@ -43,6 +45,20 @@ def robot(queue: Path) -> dict[str, str]:
     }
 
 
+def says_exported(result: subprocess.CompletedProcess[str], out: Path, first: int, last: int):
+    """The lines ``export`` printed after its summary, which must say it wrote the events
+    of queue ids ``first`` to ``last`` (those ``fill_robot_queue`` captured 0.2 s apart)
+    to ``out``. The file's size is not checked: it is compressed."""
+    summary, *rest = result.stdout.splitlines()
+    captured = [format_timestamp(START_S + (n - 1) * 0.2) for n in (first, last)]
+    expected = (
+        rf"exported {last - first + 1} event\(s\) to {re.escape(str(out))} \([\d.]+ \w+, "
+        rf"verified\), captured {captured[0]} to {captured[1]}, queue ids {first}-{last}"
+    )
+    assert re.fullmatch(expected, summary), summary
+    return rest
+
+
 def laptop(tmp_path: Path, stub) -> dict[str, str]:
     return {"QUEUE_PATH": str(tmp_path / "laptop" / "queue.db"), "PHYCLOUD_ENDPOINT": stub.endpoint}
 
@@ -54,10 +70,8 @@ def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_pat
         "export", "--out", str(tmp_path / "stick1.mcap"), "--max-bytes", "64KiB", **robot(queue)
     )
     assert first.returncode == 1, first.stderr  # events are left for the next stick
-    assert "left in the queue: run export again" in first.stdout
     second = run_cli("export", "--out", str(tmp_path / "stick2.mcap"), **robot(queue))
     assert second.returncode == 0, second.stderr
-    assert "the queue is empty" in second.stdout
     sticks = [tmp_path / "stick1.mcap", tmp_path / "stick2.mcap"]
     assert sticks[0].stat().st_size <= 64 * 1024
     manifests = []
@@ -69,7 +83,13 @@ def test_export_on_two_sticks_then_import_twice_delivers_each_event_once(tmp_pat
     assert manifests[0].schema_version == SCHEMA_VERSION
     assert manifests[0].last_id < manifests[1].first_id  # oldest first, no overlap
     assert sum(m.events for m in manifests) == 3000
-    assert run_cli("status", "--json", **robot(queue)).stdout.count('"exported_total": 3000') == 1
+    on_first = manifests[0].events
+    assert says_exported(first, sticks[0], 1, on_first) == [
+        f"{3000 - on_first} event(s) left in the queue: run export again with another file"
+    ]
+    assert says_exported(second, sticks[1], on_first + 1, 3000) == ["the queue is empty"]
+    after = json.loads(run_cli("status", "--json", **robot(queue)).stdout)
+    assert (after["exported_total"], after["queue"]["depth"]) == (3000, 0)
 
     imported = run_cli("import", *map(str, sticks), **laptop(tmp_path, stub))
     assert imported.returncode == 0, imported.stderr
@@ -112,7 +132,7 @@ def test_an_export_killed_mid_file_loses_nothing_and_sends_nothing_twice(tmp_pat
     # and exports again: the killed export's claims come back, nothing was deleted
     again = run_cli("export", "--out", str(tmp_path / "stick-again.mcap"), **robot(queue))
     assert again.returncode == 0, again.stderr
-    assert "exported 30000 event(s)" in again.stdout
+    assert says_exported(again, tmp_path / "stick-again.mcap", 1, 30_000) == ["the queue is empty"]
     imported = run_cli(
         "import", str(tmp_path / "stick-again.mcap"), timeout=300, **laptop(tmp_path, stub)
     )
@@ -182,7 +202,26 @@ def test_inspect_says_whole_damaged_or_not_an_export_by_its_exit_code(tmp_path: 
     assert report["manifest"]["source_id"] == IDENTITY["source_id"]
     damaged = run_cli("inspect", str(stick), str(cut))
     assert damaged.returncode == 1
-    assert "whole: an import delivers all 40 event(s)" in damaged.stdout
-    assert "damaged: an import delivers the 40 event(s) before the damage" in damaged.stdout
+    whole, where, verdict = verdicts(damaged.stdout)
+    assert whole == "whole: an import delivers all 40 event(s)"
+    cut_at = re.fullmatch(
+        r"  damaged      byte (\d+): the file ends inside this record \(truncated\)", where
+    )
+    assert cut_at and 0 < int(cut_at[1]) < len(cut.read_bytes()), where
+    assert verdict == "damaged: an import delivers the 40 event(s) before the damage"
     foreign = run_cli("inspect", str(stick), str(notes))
-    assert foreign.returncode == 2 and "not a phytrace-edge export" in foreign.stderr
+    assert foreign.returncode == 2
+    assert verdicts(foreign.stdout) == ["whole: an import delivers all 40 event(s)"]
+    assert foreign.stderr == (
+        f"phytrace-edge: error: {notes}: byte 0: "
+        "not a phytrace-edge export (neither MCAP nor .phx)\n"
+    )
+
+
+def verdicts(report: str) -> list[str]:
+    """``inspect``'s lines on each file's state: its verdict, and where damage begins."""
+    return [
+        line
+        for line in report.splitlines()
+        if line.startswith(("whole: ", "damaged: ", "  damaged "))
+    ]

@@ -12,7 +12,9 @@ import json
 import os
 import shutil
 import subprocess
+from collections import Counter
 from pathlib import Path
+from typing import NoReturn
 
 import pytest
 
@@ -25,19 +27,20 @@ from tests.udm_events import EVENT_TYPES, every_type
 READER = Path(__file__).with_name("mcap_reader")
 
 
+def unavailable(why: str) -> NoReturn:
+    """Skips the test, saying why; in CI the independent reader must run, never skip."""
+    if os.environ.get("CI"):
+        pytest.fail(why)
+    pytest.skip(why)
+
+
 def node_reader() -> list[str]:
     """The command that runs the reader; skips (fails in CI) when it cannot run."""
     node = shutil.which("node")
-    missing = None
     if node is None:
-        missing = "node is not installed"
-    elif not (READER / "node_modules" / "@mcap" / "core").is_dir():
-        missing = f"the npm packages are not installed in {READER} (python3 tools/test.py does)"
-    if missing:
-        if os.environ.get("CI"):  # in CI the independent reader must run, never skip
-            pytest.fail(missing)
-        pytest.skip(missing)
-    assert node is not None
+        unavailable("node is not installed")
+    if not (READER / "node_modules" / "@mcap" / "core").is_dir():
+        unavailable(f"the npm packages are not installed in {READER} (python3 tools/test.py does)")
     return [node, str(READER / "read.mjs")]
 
 
@@ -56,6 +59,8 @@ def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Pa
         if result.returncode == 0:
             break
         assert result.returncode == 1, result.stderr
+    else:
+        pytest.fail(f"the export did not finish in {len(files)} files of 96 KiB")
     assert len(files) >= 2, "the export fit one file: --max-bytes did not split it"
 
     done = subprocess.run(
@@ -67,7 +72,8 @@ def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Pa
     total = 0
     for path, document in zip(files, documents, strict=True):
         ours = open_handcarry(path)
-        ids = [event["event_id"] for event in ours.events()]
+        read_back = list(ours.events())
+        ids = [event["event_id"] for event in read_back]
         manifest = ours.manifest
         assert manifest is not None
         assert document["profile"] == "phytrace"
@@ -77,6 +83,7 @@ def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Pa
             assert channel["schemaEncoding"] == "jsonschema"
             assert channel["schemaName"] == f"phytrace.udm/{channel['topic']}"
         assert document["messages"] == document["statisticsMessageCount"] == len(ids)
+        assert document["perTopic"] == dict(Counter(event["event_type"] for event in read_back))
         assert document["invalidCount"] == 0, document["invalid"]
         assert document["logTimeMismatches"] == 0
         written = document["metadata"]["phytrace.manifest"]

@@ -5,6 +5,7 @@ observes it from outside, the way an operator or a health check would."""
 
 from __future__ import annotations
 
+import re
 import signal
 import sqlite3
 import subprocess
@@ -155,12 +156,15 @@ def test_drain_ships_a_backlog_left_by_a_stopped_bridge(tmp_path: Path, stub) ->
     assert left > 30
 
     timed_out = run_cli("drain", "--timeout", "2", **env)
-    assert timed_out.returncode == 1 and "left (HTTP 503)" in timed_out.stdout
+    assert timed_out.returncode == 1, timed_out.stdout + timed_out.stderr
+    said = rf"sent 0 event\(s\) in \d+\.\d s; {left} left \(HTTP 503\)\n"
+    assert re.fullmatch(said, timed_out.stdout), timed_out.stdout
 
     stub.set_faults(fixed_status=None)
     drained = run_cli("drain", **env)
     assert drained.returncode == 0, drained.stdout + drained.stderr
-    assert "the queue is empty" in drained.stdout
+    said = rf"drained {left} event\(s\) in \d+\.\d s; the queue is empty\n"
+    assert re.fullmatch(said, drained.stdout), drained.stdout
     assert status(env)[1]["queue"]["depth"] == 0
     assert stub.stats()["unique"] == status(env)[1]["queued_total"]
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import orjson
@@ -28,24 +29,33 @@ def test_list_export_requeue_purge(
     queue_path: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert main(["dead-letters", "list", "--queue-path", queue_path]) == 0
-    out = capsys.readouterr().out
-    assert out.startswith("1 dead letter(s) in ")
-    assert "e1  rejected: 422  bad seq" in out
+    heading, row = capsys.readouterr().out.splitlines()
+    assert heading == f"1 dead letter(s) in {queue_path}"
+    # queue id, when it was dead-lettered, event id, reason, PhyCloud's answer
+    assert re.fullmatch(
+        r" +1  \d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z  e1  rejected: 422  bad seq", row
+    )
 
     export = tmp_path / "dead.jsonl"
     assert main(["dead-letters", "export", "-o", str(export), "--queue-path", queue_path]) == 0
+    said = capsys.readouterr()  # the count on stderr: stdout may be the file (-o -)
+    assert (said.out, said.err) == ("", "exported 1 dead letter(s)\n")
     (line,) = export.read_bytes().splitlines()
     assert orjson.loads(line)["event"] == {"event_id": "e1", "seq": 1}
 
     assert main(["dead-letters", "purge", "--queue-path", queue_path]) == 2
-    assert "purge needs ids" in capsys.readouterr().err
+    said = capsys.readouterr()
+    assert (said.out, said.err) == (
+        "",
+        "phytrace-edge: error: purge needs ids, --older-than-days or --all\n",
+    )
 
     assert main(["dead-letters", "requeue", "--queue-path", queue_path]) == 0
-    assert "requeued 1" in capsys.readouterr().out
+    assert capsys.readouterr().out == "requeued 1 dead letter(s) at the end of the queue\n"
     with QueueStore.open(queue_path, limits=QueueLimits(max_bytes=64 * MIB)) as store:
         batch = store.claim_batch(10, MIB)
         assert [orjson.loads(e.json)["seq"] for e in batch.events] == [1]
         store.ack(batch, [DeadLetter(batch.events[0].id, "rejected: 400", 400)])
 
     assert main(["dead-letters", "purge", "--all", "--queue-path", queue_path]) == 0
-    assert "purged 1" in capsys.readouterr().out
+    assert capsys.readouterr().out == "purged 1 dead letter(s)\n"

@@ -1,4 +1,5 @@
-"""Settings: sources and precedence, the reference guide's names, validation messages."""
+"""Settings: sources and precedence, the names of the product's original description
+(docs/configuration.md), validation messages."""
 
 from __future__ import annotations
 

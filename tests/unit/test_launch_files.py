@@ -1,8 +1,8 @@
 """The launch files, run against a recording stand-in for ROS 2's `launch` package (ROS
-is not installable by pip): their arguments are the reference guide's, and the command
-they build gives the bridge those values as ROS parameters, and only those that were
-given (rcl refuses an empty `-p name:=`; checked by hand under real `ros2 launch`, see
-docs/ros2.md)."""
+is not installable by pip): their arguments are those of the product's original
+description (docs/ros2.md, "Launch files"), and the command they build gives the bridge
+those values as ROS parameters, and only those that were given (rcl refuses an empty
+`-p name:=`; checked by hand under real `ros2 launch`, see docs/ros2.md)."""
 
 from __future__ import annotations
 

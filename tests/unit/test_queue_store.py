@@ -6,9 +6,11 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
+import platform
 import random
 import sqlite3
 import stat
+import sys
 import threading
 import uuid
 from pathlib import Path
@@ -23,10 +25,11 @@ from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
 from phytrace_edge.queue.inspect import read_stats
 from phytrace_edge.queue.migrate import migrate, migration_files
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.records import DeadLetter
+from phytrace_edge.queue.records import DeadLetter, PutResult
 from phytrace_edge.queue.recovery import connect
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import MIB
+from tests.processes import wait_for
 from tests.unit.queue_fixtures import Clock, event, seqs
 
 
@@ -363,25 +366,56 @@ def test_damage_found_in_use_is_reported_then_moved_aside_at_the_next_open(
     assert not recovery.damage_marker(path).exists()
 
 
+# the sleeps of SQLite's busy handler (usleep or nanosleep) by machine
+SLEEP_SYSCALLS = {"x86_64": {35, 230}, "aarch64": {101, 115}}
+
+
+def sleeping_in_sqlite(thread_id: int) -> bool:
+    """Whether the thread is in a sleep system call: once it has begun a statement,
+    the only sleep in SQLite is the busy handler's, between tries for a lock."""
+    numbers = SLEEP_SYSCALLS.get(platform.machine())
+    if numbers is None or sys.platform != "linux":
+        pytest.skip(f"the sleep system calls of {sys.platform} {platform.machine()} are not listed")
+    call = Path(f"/proc/self/task/{thread_id}/syscall").read_text().split()[0]
+    return call.isdigit() and int(call) in numbers
+
+
 def test_locked_queue_waits_for_the_lock_then_gives_up(tmp_path: Path, clock: Clock) -> None:
     path = tmp_path / "q.db"
     store = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB), busy_timeout_s=0.3)
+    slow = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB), busy_timeout_s=30)
     holder = connect(path, 1.0)
     holder.execute("BEGIN IMMEDIATE")
     with pytest.raises(QueueBusyError, match="locked by another process"):
         store.put(event(1))
-    released = threading.Event()
 
-    def release_soon() -> None:
-        released.wait(5)
-        holder.execute("COMMIT")
+    begun = threading.Event()
+    slow._db.connection.set_trace_callback(
+        lambda sql: begun.set() if sql == "BEGIN IMMEDIATE" else None
+    )
+    outcome: dict[str, object] = {}
 
-    waiter = threading.Thread(target=release_soon)
+    def put_slowly() -> None:
+        outcome["thread"] = threading.get_native_id()
+        try:
+            outcome["result"] = slow.put(event(2))
+        except QueueError as exc:
+            outcome["error"] = exc
+
+    waiter = threading.Thread(target=put_slowly, daemon=True)
     waiter.start()
-    slow = QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB), busy_timeout_s=10)
-    released.set()
-    assert slow.put(event(2)).accepted == 1  # retried inside the busy timeout
-    waiter.join()
+    assert begun.wait(10), "the second store never began its transaction"
+
+    def waiting_for_the_lock() -> bool:
+        assert waiter.is_alive(), f"the put ended while the lock was held: {outcome}"
+        return sleeping_in_sqlite(int(str(outcome["thread"])))
+
+    wait_for(waiting_for_the_lock, 10, "the put to wait in SQLite's busy handler", every=0.005)
+    holder.execute("COMMIT")  # released only now: the put was refused and is retrying
+    waiter.join(10)
+    assert not waiter.is_alive()
+    assert "error" not in outcome, outcome
+    assert outcome["result"] == PutResult(accepted=1, dropped=0)  # retried inside the busy timeout
     assert store._db.read("PRAGMA integrity_check")[0][0] == "ok"
     assert store.stats().depth == 1
     store.close()

@@ -1,7 +1,8 @@
 // An independent reader of phytrace-edge hand-carry files: the MCAP project's own
 // TypeScript libraries read each file given, and Ajv checks every message against its
 // channel's JSON Schema. Prints one JSON document per file; exits 1 if a file cannot be
-// read. Used by tests/integration/test_handcarry_mcap.py (npm packages in package.json).
+// read. Used by tests/integration/test_handcarry_mcap_reader.py (npm packages in
+// package.json).
 import { open } from "node:fs/promises";
 import { McapIndexedReader } from "@mcap/core";
 import { FileHandleReadable } from "@mcap/nodejs";
