@@ -66,7 +66,7 @@ class Built(NamedTuple):
 
 
 class UDMBuilder:
-    """Latest values in, one UDM event per ``build_event`` call out."""
+    """Latest values in, one UDM event per ``build`` call (a sample tick) out."""
 
     def __init__(
         self,
@@ -178,12 +178,9 @@ class UDMBuilder:
         }
         return {"/rosout": logs, **self.extra.stats()}
 
-    def build_event(self, captured_at_s: float | None = None) -> dict[str, Any]:
-        """The event for this tick; ``captured_at_s`` overrides the wall clock (replay)."""
-        return self.build(captured_at_s).event
-
     def build(self, captured_at_s: float | None = None) -> Built:
-        """The event for this tick and its class (see the module doc)."""
+        """The event for this tick and its class (see the module doc); ``captured_at_s``
+        overrides the wall clock (a replay's timeline)."""
         now_mono = self._clock.monotonic()
         captured_at = self._clock.wall() if captured_at_s is None else captured_at_s
         with self._lock:

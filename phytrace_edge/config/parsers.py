@@ -14,7 +14,7 @@ import os
 import re
 import stat
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import urlsplit
 
 from phytrace_edge.ingest.qos import QosChoice
@@ -34,6 +34,8 @@ _IDENTIFIER = r"[A-Za-z0-9][A-Za-z0-9._:@-]{0,127}"
 _NAMESPACE = r"(/[A-Za-z][A-Za-z0-9_]*)+"
 _TOPIC = r"(/[A-Za-z0-9_~{}]+)+"
 _API_KEY = r"[\x21-\x7e]{1,4096}"  # printable ASCII, no spaces
+
+T = TypeVar("T")
 
 
 def _matches(pattern: str, text: str) -> re.Match[str] | None:
@@ -108,8 +110,8 @@ def int_between(lower: int, upper: int) -> Callable[[Any], int]:
     return _bounded(_int, lower, upper, f"a whole number from {lower} to {upper}", open_low=False)
 
 
-def optional(parse: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    def parse_optional(raw: Any) -> Any:
+def optional(parse: Callable[[Any], T]) -> Callable[[Any], T | None]:
+    def parse_optional(raw: Any) -> T | None:
         if raw is None or (isinstance(raw, str) and raw.strip().lower() in ("", "none")):
             return None
         try:

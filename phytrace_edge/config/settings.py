@@ -2,8 +2,9 @@
 
 Naming: the environment variable is the upper-case name (``SAMPLE_RATE_HZ``), the TOML
 key and ROS parameter the lower-case name (``sample_rate_hz``) and the flag its dashed
-form (``--sample-rate-hz``). The reference guide's aliases (``ROBOT_ID``,
-``ROBOT_TYPE``) keep working; the primary name wins when both are set. Defaults of a
+form (``--sample-rate-hz``). The aliases of the product's original description
+(``ROBOT_ID``, ``ROBOT_TYPE``; docs/configuration.md) keep working; the primary name
+wins when both are set. Defaults of a
 stage's settings are the stage's own constants (its ``defaults.py``); the rest
 (logging, health, metrics, shutdown) are the runtime's and live here.
 
@@ -14,7 +15,7 @@ standard library (tests/unit/test_startup.py).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 from phytrace_edge.builder.defaults import (
     DEFAULT_ROSOUT_BURST,
@@ -60,6 +61,8 @@ SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
 DEFAULT_SHUTDOWN_GRACE_S = 5.0
 DEFAULT_HEALTH_EVENT_INTERVAL_S = 60.0
 
+T = TypeVar("T")
+
 
 class Setting:
     """One setting: its default, its parser (which is its validation rule), its doc
@@ -89,9 +92,10 @@ class Setting:
         return "--" + self.key.replace("_", "-")
 
 
-def setting(default: Any, parse: Callable[[Any], Any], doc: str, *aliases: str) -> Any:
-    """Declare one setting of ``Settings`` (typed as its value, for the type checker)."""
-    return Setting(default, parse, doc, aliases)
+def setting(default: T, parse: Callable[[Any], T], doc: str, *aliases: str) -> T:
+    """Declare one setting of ``Settings``, typed as its value for the type checker: the
+    declared type must hold both the default and what the parser returns."""
+    return cast(T, Setting(default, parse, doc, aliases))  # a descriptor that reads as T
 
 
 class Settings:
@@ -206,7 +210,7 @@ class Settings:
     stale_after_s: float = setting(
         DEFAULT_STALE_AFTER_S, positive_float(86400), "drop a domain whose data is older"
     )
-    topic_remap: dict[str, str] = setting(
+    topic_remap: dict[str, str] | None = setting(
         None, optional(topic_remap), "topic renames, /odom=/wheel/odom,..."
     )
     topics_disabled: frozenset[str] = setting(
@@ -215,7 +219,7 @@ class Settings:
     topic_namespace: str | None = setting(
         None, optional(namespace), "prefix of the topic names, e.g. /robot1"
     )
-    topic_qos: dict[str, QosChoice] = setting(
+    topic_qos: dict[str, QosChoice] | None = setting(
         None, optional(topic_qos), "per-topic QoS instead of matching, /scan=best_effort,..."
     )
     topics_extra: tuple[ExtraTopic, ...] = setting(

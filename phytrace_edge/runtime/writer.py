@@ -224,8 +224,10 @@ class QueueWriter:
                 self._pending.extendleft(reversed(handed))  # with their hand-off times
                 self._in_hand = 0
             self._failed(exc)
+            # a pause, not a hand-shake: after a stop the writer still retries until
+            # the deadline, and a wait on the set ``stop`` would make that a busy loop
             remaining = RETRY_S if self._deadline is None else self._deadline - started
-            time.sleep(max(0.0, min(RETRY_S, remaining)))  # a pause, not a hand-shake
+            time.sleep(max(0.0, min(RETRY_S, remaining)))
             return True
         finished = self._monotonic()
         self._commits.record(finished - started, finished)

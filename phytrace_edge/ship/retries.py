@@ -5,8 +5,10 @@ The wait before the next try is ``Retry-After`` when the server gave one, never 
 than RETRY_MIN_S (a 0, a negative value or a date in the past would make a tight
 loop) and up to 20% later, so a fleet told the same time spreads out; RETRY_MAX_S for
 refusals data cannot fix, and for a single event whose answers never account for it;
-else exponential backoff with full jitter between RETRY_MIN_S and RETRY_MAX_S, which
-spreads a fleet's retries after an outage.
+else exponential backoff with full jitter, which spreads a fleet's retries after an
+outage: try ``n`` (from 1) waits a uniform draw between RETRY_MIN_S and
+min(RETRY_MAX_S, RETRY_MIN_S * 2 ** (n - 1)). Every draw is the sender's ``rng``'s,
+so a seeded one makes the waits reproducible.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from __future__ import annotations
 import logging
 import random
 
-from tenacity import RetryCallState, wait_random_exponential
+from tenacity import RetryCallState, wait_exponential
 
 from phytrace_edge.errors import EndpointRefusedError, TransientSendError, UnaccountedAnswerError
 from phytrace_edge.ship.options import SendPolicy
@@ -33,10 +35,9 @@ class Backoff:
     def __init__(self, policy: SendPolicy, rng: random.Random) -> None:
         self._min_s, self._max_s = policy.retry_min_s, policy.retry_max_s
         self._rng = rng
-        # full jitter between RETRY_MIN_S and the exponential bound (never a tight loop)
-        self._exponential = wait_random_exponential(
-            multiplier=self._min_s, max=self._max_s, min=self._min_s
-        )
+        # the exponential bound of the full jitter (never below RETRY_MIN_S: no tight
+        # loop); tenacity's wait_random_exponential would draw from the global random
+        self._bound = wait_exponential(multiplier=self._min_s, max=self._max_s, min=self._min_s)
 
     def seconds(self, state: RetryCallState, long: bool = False) -> float:
         """Seconds to wait after the failed try ``state`` holds; RETRY_MAX_S when
@@ -47,7 +48,7 @@ class Backoff:
         if isinstance(exc, TransientSendError) and exc.retry_after is not None:
             wait = max(exc.retry_after, self._min_s)
             return wait * (1 + RETRY_AFTER_JITTER * self._rng.random())
-        return float(self._exponential(state))
+        return self._rng.uniform(self._min_s, self._bound(state))
 
 
 def say_retrying(exc: BaseException | None, attempt: int, wait_s: float) -> None:

@@ -93,11 +93,12 @@ class Sender:
         self.stats = SendStats()
         # the store's clock (queue time): the sender's times are compared with its rows'
         self._clock = clock or store.now
-        self._rng = rng or random.Random()
-        self._pause = sleep or self._wait_beating
+        self._rng = rng or random.Random()  # the jitter of every backoff
+        # how a wait is spent (tests pass ``sleep`` to record them): on ``stop``, beating
+        self._spend_wait: Callable[[float], object] = sleep or self._wait_beating
         self._beat: Callable[[], None] = lambda: None
         self._deadline: float | None = None
-        self._throttle = Throttle(policy.upload_max_bps, self._sleep)
+        self._throttle = Throttle(policy.upload_max_bps, self._wait_or_stop)
         self._encoders = threading.local()  # python-zstandard: one compressor per thread
         self._lanes = Lanes(policy.live_share, store.now())
         self._backoff = Backoff(policy, self._rng)
@@ -146,8 +147,8 @@ class Sender:
                         elif drain and self.store.counter("depth") == 0:
                             return
                         else:  # nothing due, or another process holds what is left
-                            self.stop.wait(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
-                            self._beat()  # idle is alive: a quiet robot is no stalled sender
+                            # idle is alive: a quiet robot is no stalled sender
+                            self._wait_beating(min(POLL_INTERVAL_S, self.policy.flush_interval_s))
                         continue
                     # while requests fail, one at a time: an outage is not hit twice as often
                     limit = 1 if self._lanes.failing else self.policy.requests_in_flight
@@ -181,18 +182,12 @@ class Sender:
     def _queue_trouble(self, exc: QueueError, pause: bool = True) -> None:
         """The queue could not be read or written this time (another process holds the
         write lock, the disk is full): count it, say so now and then, and wait a bit."""
-        with self.stats.lock:
-            self.stats.queue_errors += 1
-            errors = self.stats.queue_errors
-        self.stats.update(last_queue_error=str(exc), last_queue_error_at=self._clock())
+        errors = self.stats.count_queue_error(exc, self._clock())
         if errors in (1, 10) or errors % 100 == 0:
             log.error("cannot use the queue to send (%s); trying again", exc)
         if pause:
-            self._sleep_quietly(QUEUE_RETRY_S)
-
-    def _sleep_quietly(self, seconds: float) -> None:
-        with contextlib.suppress(Stopped):
-            self._sleep(seconds)
+            with contextlib.suppress(Stopped):  # the loop sees the stop itself
+                self._wait_or_stop(QUEUE_RETRY_S)
 
     def _past_deadline(self) -> bool:
         return self._deadline is not None and time.monotonic() >= self._deadline
@@ -256,7 +251,7 @@ class Sender:
         newest = max(event.queued_at for event in batch.events)
         self.stats.delivered(prepared.lane, len(batch.events), newest)
         if dead:
-            self.stats.update(add_dead_lettered=len(dead))
+            self.stats.add_dead_lettered(len(dead))
             log.error(
                 "%d event(s) rejected by PhyCloud moved to dead letters (%s) - see "
                 "phytrace-edge dead-letters list",
@@ -264,12 +259,6 @@ class Sender:
                 dead[0].reason,
             )
         return len(batch.events)
-
-    def send_next_batch(self, flush: bool = False) -> int:
-        """Claim, send and ack one batch in this thread; the number of events it held
-        (0: none due)."""
-        prepared = self.prepare_next(flush)
-        return 0 if prepared is None else self.post(prepared)
 
     # ------------------------------------------------------------------ delivery
 
@@ -295,13 +284,13 @@ class Sender:
                     events[0].id, f"rejected: HTTP {outcome.status}", outcome.status, outcome.reason
                 )
             ]
-        self.stats.update(add_batches_split=1)
+        self.stats.count_split()
         return [
             dead for part in split_refused(events, outcome) for dead in self._deliver(batch, part)
         ]
 
     def _halve(self, batch: Batch, events: Sequence[QueuedEvent]) -> list[DeadLetter]:
-        self.stats.update(add_batches_split=1)
+        self.stats.count_split()
         middle = len(events) // 2
         return self._deliver(batch, events[:middle]) + self._deliver(batch, events[middle:])
 
@@ -330,7 +319,7 @@ class Sender:
         retrying = Retrying(
             retry=retry_if_exception_type(TransientSendError),
             wait=wait,
-            sleep=self._sleep,
+            sleep=self._wait_or_stop,
             before_sleep=lambda state: self._before_retry(batch, state),
             reraise=True,
         )
@@ -349,7 +338,7 @@ class Sender:
                 except UnaccountedAnswerError as exc:
                     unaccounted += 1
                     if unaccounted >= UNACCOUNTED_BEFORE_SPLIT and len(events) > 1:
-                        self.stats.failed(exc, self._clock())  # counted as the ones before
+                        self.stats.count_retry(exc, self._clock())  # counted as the ones before
                         say_halving(exc, len(events))
                         return None
                     raise
@@ -361,24 +350,29 @@ class Sender:
                 return outcome
         raise AssertionError("tenacity returns or raises")
 
+    # ------------------------------------------------------------------ waits
+
+    def _wait_or_stop(self, seconds: float) -> None:
+        """Wait ``seconds`` (a backoff, the upload throttle, a queue in trouble) through
+        ``sleep``, keeping the heartbeat; cut short by a stop or the drain's deadline,
+        and then raise Stopped: the batch being retried goes back to the queue."""
+        if self._deadline is not None:
+            seconds = min(seconds, max(0.0, self._deadline - time.monotonic()))
+        self._spend_wait(seconds)
+        if self.stop.is_set() or self._past_deadline():
+            raise Stopped
+
     def _wait_beating(self, seconds: float) -> None:
-        """Wait ``seconds`` or until stopped, beating at least once a second."""
+        """Wait ``seconds`` or until stopped, beating at least once a second (and once
+        at the end): a waiting sender is no hung one."""
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0 and not self.stop.wait(min(left, BEAT_S)):
             self._beat()
 
-    def _sleep(self, seconds: float) -> None:
-        """Sleep, but wake up at once when asked to stop or at the drain's deadline."""
-        if self._deadline is not None:
-            seconds = min(seconds, max(0.0, self._deadline - time.monotonic()))
-        self._pause(seconds)
-        if self.stop.is_set() or self._past_deadline():
-            raise Stopped
-
     def _before_retry(self, batch: Batch, state: RetryCallState) -> None:
         exc = state.outcome.exception() if state.outcome else None
         self._lanes.failed(self.store.now())
-        self.stats.failed(exc, self._clock())
+        self.stats.count_retry(exc, self._clock())
         say_retrying(exc, state.attempt_number, state.upcoming_sleep)
         with contextlib.suppress(QueueError):  # a lease that runs out only means a resend
             self.store.renew(batch)
@@ -386,12 +380,6 @@ class Sender:
     def _record_success(self, events: int, size: int, status: int) -> None:
         self._lanes.succeeded()
         if 200 <= status < 300:
-            self.stats.update(
-                add_events_sent=events,
-                add_batches_sent=1,
-                add_bytes_sent=size,
-                last_success_at=self._clock(),
-                last_status=status,
-            )
+            self.stats.add_sent(events, size, status, self._clock())
         else:
-            self.stats.update(last_status=status)
+            self.stats.set_status(status)

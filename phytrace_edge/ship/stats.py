@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from phytrace_edge.errors import EndpointRefusedError, UnexpectedAnswerError
@@ -12,10 +12,10 @@ LATENCY_BUCKETS_S = (0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10
 _INTERNAL = ("latency_buckets", "latency_count", "latency_sum_s", "lock")
 
 
-@dataclass
+@dataclass(slots=True)
 class SendStats:
     """What status and metrics show about sending. Requests in flight update it from
-    their threads: every change is made under ``lock`` (``update``)."""
+    their threads: every change is made by a method here, under ``lock``."""
 
     events_sent: int = 0
     batches_sent: int = 0
@@ -45,14 +45,20 @@ class SendStats:
     latency_sum_s: float = 0.0
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
 
-    def update(self, **changes: Any) -> None:
-        """Set fields, and add to the counters named ``add_<field>``, at once."""
+    def add_sent(self, events: int, body_bytes: int, status: int, at: float) -> None:
+        """Count a request PhyCloud answered with a 2xx that accounts for its events."""
         with self.lock:
-            for name, value in changes.items():
-                if name.startswith("add_"):
-                    setattr(self, name[4:], getattr(self, name[4:]) + value)
-                else:
-                    setattr(self, name, value)
+            self.events_sent += events
+            self.batches_sent += 1
+            self.bytes_sent += body_bytes
+            self.last_success_at = at
+            self.last_status = status
+
+    def set_status(self, status: int) -> None:
+        """Remember the status of an answer that is final but no success (a refusal
+        of bad data, dead-lettered or split)."""
+        with self.lock:
+            self.last_status = status
 
     def delivered(self, lane: str, events: int, newest_queued_at: float) -> None:
         """Count a batch PhyCloud accepted, by lane (``live`` or ``backfill``)."""
@@ -64,20 +70,38 @@ class SendStats:
             newest = self.newest_delivered_at
             self.newest_delivered_at = max(newest or newest_queued_at, newest_queued_at)
 
-    def failed(self, exc: BaseException | None, at: float) -> None:
+    def add_dead_lettered(self, events: int) -> None:
+        """Count events PhyCloud refused for good, moved to dead letters."""
+        with self.lock:
+            self.dead_lettered += events
+
+    def count_split(self) -> None:
+        """Count a batch split in two or more parts (refused, too large, unaccounted)."""
+        with self.lock:
+            self.batches_split += 1
+
+    def count_retry(self, exc: BaseException | None, at: float) -> None:
         """Count an attempt that failed and will be retried, and remember why."""
         status = getattr(exc, "status", None)
-        if isinstance(exc, EndpointRefusedError):
-            self.update(last_refusal=str(exc), last_refusal_at=at)
-        self.update(
-            add_retries=1,
-            last_error=str(exc),
-            last_error_class=self.error_class(exc, status),
-            last_error_at=at,
-            last_status=status,
-            add_unexpected_answers=int(isinstance(exc, UnexpectedAnswerError)),
-            add_auth_failures=int(isinstance(exc, EndpointRefusedError) and status in (401, 403)),
-        )
+        with self.lock:
+            self.retries += 1
+            if isinstance(exc, EndpointRefusedError):
+                self.last_refusal, self.last_refusal_at = str(exc), at
+                if status in (401, 403):
+                    self.auth_failures += 1
+            if isinstance(exc, UnexpectedAnswerError):
+                self.unexpected_answers += 1
+            self.last_error = str(exc)
+            self.last_error_class = self.error_class(exc, status)
+            self.last_error_at = at
+            self.last_status = status
+
+    def count_queue_error(self, exc: BaseException, at: float) -> int:
+        """Count a time the queue could not be used to send; how many times so far."""
+        with self.lock:
+            self.queue_errors += 1
+            self.last_queue_error, self.last_queue_error_at = str(exc), at
+            return self.queue_errors
 
     def observe_latency(self, seconds: float) -> None:
         """Count one request's duration into the cumulative histogram."""
@@ -99,5 +123,6 @@ class SendStats:
         return type(exc.__cause__ or exc).__name__
 
     def as_dict(self) -> dict[str, Any]:
+        """The figures status and metrics show (``SenderFigures``), at one moment."""
         with self.lock:
-            return {k: v for k, v in vars(self).items() if k not in _INTERNAL}
+            return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in _INTERNAL}

@@ -175,6 +175,6 @@ def test_every_handler_survives_hostile_input_and_events_stay_valid(data: st.Dat
             continue
         assert non_finite_values(reading) == [], (topic, reading)
         builder.add_reading(topic, reading)
-    event = builder.build_event()
+    event = builder.build().event
     assert non_finite_values(event) == []
     assert find_violation(event) is None, find_violation(event)

@@ -19,7 +19,7 @@ from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import FunctionTransport
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import Clock
-from tests.unit.test_sender import FakeCloud
+from tests.unit.test_sender import FakeCloud, send_one
 
 
 @pytest.fixture
@@ -71,11 +71,11 @@ def test_the_first_request_after_an_outage_carries_the_newest_events(store, cloc
     put(store, 0, 500)
     cloud = Outage(store, clock)
     s = sender(store, cloud, live_share=0.2)
-    s.send_next_batch()  # a probe fails (the outage), then its retry gets through
+    send_one(s)  # a probe fails (the outage), then its retry gets through
     assert seqs_of(cloud.requests[1]) == list(range(10))
-    s.send_next_batch()
+    send_one(s)
     assert seqs_of(cloud.requests[2]) == list(range(1000, 1030)), "then the present"
-    s.send_next_batch()
+    send_one(s)
     assert seqs_of(cloud.requests[3]) == list(range(10, 110)), "then the backfill"
     assert s.stats.live_events_sent == 30 and s.stats.backfill_events_sent == 110
     assert s.stats.newest_delivered_at == clock.now
@@ -99,7 +99,7 @@ def test_the_live_lane_gets_its_share_of_a_backlog(store, clock) -> None:
     s._lanes.succeeded()  # the link is known to be up
     for n in range(8):  # the robot keeps queueing 5 events per request
         put(store, 10_000 + 5 * n, 5)
-        s.send_next_batch()
+        send_one(s)
     lanes = ["live" if seqs_of(r)[0] >= 10_000 else "backfill" for r in cloud.requests]
     assert lanes == ["backfill"] * 3 + ["live"] + ["backfill"] * 3 + ["live"]
     assert seqs_of(cloud.requests[3]) == list(range(10_000, 10_020))

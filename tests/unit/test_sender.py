@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gzip
 import logging
+import random
 import threading
 import time
 from collections.abc import Mapping
@@ -14,14 +15,19 @@ import orjson
 import pytest
 import zstandard
 
-from phytrace_edge.errors import TransientSendError
+from phytrace_edge.errors import (
+    EndpointRefusedError,
+    QueueBusyError,
+    TransientSendError,
+    UnexpectedAnswerError,
+)
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.redact import Secret
 from phytrace_edge.ship.options import SendPolicy
-from phytrace_edge.ship.request import idempotency_key
 from phytrace_edge.ship.responses import Reply, parse_retry_after
 from phytrace_edge.ship.sender import Sender
+from phytrace_edge.ship.stats import SendStats
 from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import FunctionTransport, HttpTransport
 from phytrace_edge.units import MIB
@@ -76,14 +82,35 @@ def put(store: QueueStore, count: int, start: int = 0, **extra) -> list[str]:
     return [e["event_id"] for e in events]
 
 
-def sender(store, cloud, waits=None, **policy) -> Sender:
+def sender(store, cloud, waits=None, rng=None, **policy) -> Sender:
     policy.setdefault("batch_size", 10)
     return Sender(
         store,
         FunctionTransport(cloud),
         SendPolicy(**policy),
+        rng=rng,
         sleep=(waits.append if waits is not None else lambda s: None),
     )
+
+
+def send_one(s: Sender) -> int:
+    """One step of the sender's pipeline in this thread, to look between two requests:
+    claim and encode the next batch, then post it; the events it held (0: none due)."""
+    prepared = s.prepare_next()
+    return 0 if prepared is None else s.post(prepared)
+
+
+def run_in_thread(s: Sender, beat=lambda: None) -> threading.Thread:
+    """``Sender.run`` as the service runs it; stopped by ``stop_thread``."""
+    worker = threading.Thread(target=s.run, args=(s.stop, beat))
+    worker.start()
+    return worker
+
+
+def stop_thread(s: Sender, worker: threading.Thread) -> None:
+    s.stop.set()
+    worker.join(timeout=10)
+    assert not worker.is_alive(), "a stop ends the sender's loop"
 
 
 def test_delivers_in_batches_in_order(store) -> None:
@@ -101,7 +128,7 @@ def test_a_backlog_goes_in_bigger_requests_and_live_events_in_small_ones(store) 
     ids = put(store, 1234)
     cloud = FakeCloud()
     s = sender(store, cloud, backlog_batch_size=500, requests_in_flight=1)
-    s.send_next_batch()  # nothing says the link is up yet: the first request is a probe
+    send_one(s)  # nothing says the link is up yet: the first request is a probe
     assert s.drain() is True
     assert [len(events) for events, _ in cloud.requests] == [10, 500, 500, 224]
     assert [e["event_id"] for events, _ in cloud.requests for e in events] == ids
@@ -136,7 +163,6 @@ def test_the_next_request_goes_out_while_one_is_in_flight(store) -> None:
         SendPolicy(batch_size=10, backlog_batch_size=100, requests_in_flight=2),
         sleep=lambda s: None,
     )
-    s.send_next_batch()
     assert s.drain() is True
     assert store.stats().acked_total == 400
 
@@ -167,23 +193,29 @@ def test_headers_and_encodings(store, encoding: str) -> None:
 def test_idempotency_key_is_stable_for_the_same_batch(store) -> None:
     put(store, 4)
     cloud = FakeCloud(503)
-    sender(store, cloud).drain()
-    first, second = (headers["Idempotency-Key"] for _, headers in cloud.requests)
-    assert first == second
-    batch = store.claim_batch(1, MIB)
-    assert batch is None
-    assert idempotency_key([]) != first
+    assert sender(store, cloud).drain() is True
+    put(store, 4, start=4)
+    assert sender(store, cloud).drain() is True
+    (tried, first), (retried, second), (other, third) = cloud.requests
+    assert retried == tried and second["Idempotency-Key"] == first["Idempotency-Key"]
+    assert other != tried and third["Idempotency-Key"] != first["Idempotency-Key"]
 
 
 def test_retries_5xx_and_timeouts_with_growing_jittered_backoff(store) -> None:
+    """Try n waits a draw of the sender's rng between RETRY_MIN_S and the bound
+    min(RETRY_MAX_S, RETRY_MIN_S * 2 ** (n - 1)): seeded, the waits are known."""
     put(store, 5)
     waits: list[float] = []
     cloud = FakeCloud(500, 502, TransientSendError("timeout"), 503, 504, 408, 425, 429)
-    s = sender(store, cloud, waits, retry_min_s=1, retry_max_s=8)
+    s = sender(store, cloud, waits, rng=random.Random(7), retry_min_s=1, retry_max_s=8)
     assert s.drain() is True
     assert len(cloud.requests) == 9 and len(cloud.stored) == 5
     assert s.stats.retries == 8
-    assert all(0 <= w <= 8 for w in waits) and len(waits) == 8
+    bounds = [1, 2, 4, 8, 8, 8, 8, 8]
+    assert all(1 <= wait <= bound for wait, bound in zip(waits, bounds, strict=True))
+    same_seed = random.Random(7)
+    assert waits == [same_seed.uniform(1, bound) for bound in bounds]
+    assert max(waits[:3]) < 4 < max(waits[3:])  # this seed's draws show the growth
     assert store.stats().drops == {}
 
 
@@ -334,11 +366,58 @@ def test_partial_batch_waits_for_the_flush_interval(store) -> None:
         clock=lambda: now[0],
         sleep=lambda s: None,
     )
-    store_queued_at = store.backlog()[1]
-    now[0] = store_queued_at + 1.0
-    assert s.send_next_batch() == 0
-    now[0] = store_queued_at + 2.0
-    assert s.send_next_batch() == 3
+    queued_at = store.backlog()[1]
+    assert queued_at is not None
+    now[0] = queued_at + 1.0
+    idle_rounds: list[None] = []  # a beat while idle: the sender looked and nothing was due
+    worker = run_in_thread(s, lambda: idle_rounds.append(None))
+    try:
+        wait_for(lambda: len(idle_rounds) >= 2, 10, "the sender to look twice")
+        assert cloud.requests == [], "a partial batch went before FLUSH_INTERVAL_S"
+        now[0] = queued_at + 2.0
+        wait_for(lambda: cloud.requests, 10, "the partial batch")
+    finally:
+        stop_thread(s, worker)
+    assert [len(events) for events, _ in cloud.requests] == [3]
+
+
+def test_send_stats_count_what_their_methods_say() -> None:
+    stats = SendStats()
+    stats.add_sent(3, 120, 200, at=10.0)
+    stats.add_sent(2, 80, 202, at=11.0)
+    stats.delivered("live", 2, newest_queued_at=9.0)
+    stats.delivered("backfill", 3, newest_queued_at=5.0)
+    stats.count_retry(EndpointRefusedError("HTTP 401: bad key", status=401), at=12.0)
+    stats.count_retry(EndpointRefusedError("HTTP 415: encoding", status=415), at=13.0)
+    stats.count_retry(UnexpectedAnswerError("a captive portal", status=200), at=14.0)
+    stats.count_split()
+    stats.add_dead_lettered(4)
+    stats.set_status(400)
+    assert stats.count_queue_error(QueueBusyError("busy"), at=15.0) == 1
+    assert stats.count_queue_error(QueueBusyError("still busy"), at=16.0) == 2
+    assert stats.as_dict() == {
+        "events_sent": 5,
+        "batches_sent": 2,
+        "bytes_sent": 200,
+        "retries": 3,
+        "batches_split": 1,
+        "dead_lettered": 4,
+        "auth_failures": 1,  # the 401; a 415 is a refusal, not of the key
+        "unexpected_answers": 1,
+        "last_success_at": 11.0,
+        "last_error": "a captive portal",
+        "last_error_class": "HTTP 200",
+        "last_error_at": 14.0,
+        "last_status": 400,
+        "last_refusal": "HTTP 415: encoding",
+        "last_refusal_at": 13.0,
+        "live_events_sent": 2,
+        "backfill_events_sent": 3,
+        "newest_delivered_at": 9.0,
+        "queue_errors": 2,
+        "last_queue_error": "still busy",
+        "last_queue_error_at": 16.0,
+    }
 
 
 def test_throttle_spreads_bytes_over_time() -> None:
@@ -382,15 +461,14 @@ def test_an_idle_sender_still_says_it_is_alive(store) -> None:
     """Nothing to send (a quiet robot, every topic silent) is no stall: the sender beats
     while idle, or status and the systemd watchdog would take it for hung."""
     beats: list[float] = []
-    s = sender(store, FakeCloud(), flush_interval_s=0.05)
-    worker = threading.Thread(target=s.run, args=(s.stop, lambda: beats.append(time.monotonic())))
-    worker.start()
+    cloud = FakeCloud()
+    s = sender(store, cloud, flush_interval_s=0.05)
+    worker = run_in_thread(s, lambda: beats.append(time.monotonic()))
     try:
         wait_for(lambda: len(beats) >= 3, 10, "the idle sender's beats")
     finally:
-        s.stop.set()
-        worker.join(timeout=10)
-    assert len(beats) >= 3 and store.counter("depth") == 0
+        stop_thread(s, worker)  # and the idle sender hears the stop
+    assert cloud.requests == [], "nothing was queued: the beats are the idle loop's"
 
 
 def test_a_batch_retrying_across_a_clock_step_is_sent_again_repaired(tmp_path: Path) -> None:

@@ -48,7 +48,7 @@ class Bridge:
         and checked against the schema."""
         self.clock.advance(1.0)
         events = [built.event for built in self.builder.side_events()]
-        events.append(self.builder.build_event())
+        events.append(self.builder.build().event)
         for event in events:
             orjson.dumps(event)  # what the queue writer does: raises on a lone surrogate
             assert find_violation(event) is None, event
