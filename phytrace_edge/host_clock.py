@@ -1,6 +1,7 @@
 """What the kernel says about this machine's clocks: which boot this is, and whether
-the wall clock is synchronized. Read by the queue (queue time, ``queue/clock.py``) and by
-the builder's wiring (events stamped on an unsynchronized clock say so)."""
+the wall clock is synchronized. Read by the queue (queue time,
+``queue/timekeeping/clock.py``) and by the builder's wiring (events stamped on an
+unsynchronized clock say so)."""
 
 from __future__ import annotations
 

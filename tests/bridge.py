@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from phytrace_edge.config import Settings, load_settings
-from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.runtime import options, wiring
 from phytrace_edge.runtime.health import report, thresholds
 from phytrace_edge.ship.transport import Transport

@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from phytrace_edge.ship.export import open_handcarry
-from phytrace_edge.ship.handcarry import DamagedExport
+from phytrace_edge.handcarry.format import DamagedExport
+from phytrace_edge.handcarry.transfer import open_handcarry
 
 
 def read_all(path: Path) -> tuple[list[dict[str, Any]], DamagedExport | None]:

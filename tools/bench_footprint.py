@@ -41,7 +41,7 @@ sys.path.insert(0, str(TOOLS.parent))
 from bench_ingest import cpu_seconds  # noqa: E402 - tools/, beside this file
 from bench_outage import Receiver, fill, simulated_events  # noqa: E402
 
-from phytrace_edge.queue.inspect import read_stats  # noqa: E402
+from phytrace_edge.queue.peek import read_stats  # noqa: E402
 
 MIB_KB = 1024
 WARM_UP_S = 10.0

@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from phytrace_edge import run_simulation
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.repair import pending_repair
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.queue.timekeeping.repair import pending_repair
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import GIB, MIB
 from tests.unit.queue_fixtures import NOW, Y2001, Machine

@@ -102,7 +102,7 @@ def thread_contexts(kept: list[object]) -> Callable[[], None]:
     def make() -> None:
         import zstandard
 
-        from phytrace_edge.queue.codecs import ZSTD_LEVEL, packaged_dictionary
+        from phytrace_edge.queue.encoding.codecs import ZSTD_LEVEL, packaged_dictionary
 
         dictionary = zstandard.ZstdCompressionDict(packaged_dictionary()[1])
         compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL, dict_data=dictionary)

@@ -2,7 +2,7 @@
 
     .venv/bin/python tools/train_queue_dictionary.py
 
-Writes phytrace_edge/queue/udm-events.zdict. Real robots' events share the UDM's keys
+Writes phytrace_edge/queue/encoding/udm-events.zdict. Real robots' events share the UDM's keys
 and structure, which is most of what a dictionary captures. Rows record the id of the
 dictionary they were written with and the database keeps every dictionary it used,
 so retraining never makes old rows unreadable.
@@ -18,7 +18,13 @@ import zstandard
 from phytrace_edge import run_simulation
 
 DICTIONARY_BYTES = 16 * 1024
-OUT = Path(__file__).resolve().parent.parent / "phytrace_edge" / "queue" / "udm-events.zdict"
+OUT = (
+    Path(__file__).resolve().parent.parent
+    / "phytrace_edge"
+    / "queue"
+    / "encoding"
+    / "udm-events.zdict"
+)
 
 
 def main() -> None:

@@ -38,8 +38,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
     from tqdm import tqdm
 
+    from phytrace_edge.handcarry.transfer import export_backlog
     from phytrace_edge.runtime import wiring
-    from phytrace_edge.ship.export import export_backlog
 
     settings, out = loaded.settings, Path(args.out)
     if not Path(options.queue_path(settings)).exists():

@@ -58,8 +58,8 @@ def _import_one(path: Path, store: QueueStore, sender: Sender, deadline: float |
     """Read ``path`` into ``store`` and send it all; False when anything is missing."""
     from tqdm import tqdm
 
-    from phytrace_edge.ship.export import export_chunks
-    from phytrace_edge.ship.handcarry import NotAnExport
+    from phytrace_edge.handcarry.format import NotAnExport
+    from phytrace_edge.handcarry.transfer import export_chunks
 
     if not path.is_file():
         error(f"{path}: no such file")

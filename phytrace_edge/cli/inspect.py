@@ -13,7 +13,7 @@ from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_BAD_INPUT, EXIT_OK, EXIT_UNHEALTHY
 
 if TYPE_CHECKING:  # the report loads the file formats' libraries: run() imports it
-    from phytrace_edge.ship.handcarry_report import FileReport
+    from phytrace_edge.handcarry.report import FileReport
 
 NAME = "inspect"
 HELP = (
@@ -31,8 +31,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace, loaded: LoadedSettings) -> int:
-    from phytrace_edge.ship.handcarry import NotAnExport
-    from phytrace_edge.ship.handcarry_report import inspect_file
+    from phytrace_edge.handcarry.format import NotAnExport
+    from phytrace_edge.handcarry.report import inspect_file
 
     worst = EXIT_OK
     for name in args.files:

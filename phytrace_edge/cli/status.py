@@ -10,15 +10,15 @@ from typing import Any, cast
 from phytrace_edge.cli.common import error, print_json
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, QueueError
-from phytrace_edge.queue.inspect import QueueStats, read_stats
+from phytrace_edge.queue.peek import QueueStats, read_stats
 from phytrace_edge.runtime import live_status
-from phytrace_edge.runtime.documents import (
+from phytrace_edge.runtime.health import Live, Thresholds, exit_code, report, thresholds
+from phytrace_edge.runtime.status_documents import (
     ClockSection,
     LinkSection,
     ServiceDocument,
     StatusReport,
 )
-from phytrace_edge.runtime.health import Live, Thresholds, exit_code, report, thresholds
 from phytrace_edge.units import format_bytes
 
 LOGS = False  # status prints, it does not log: the health check starts it every 30 s

@@ -19,7 +19,7 @@ Two flags say how a topic's messages are treated:
 from collections.abc import Callable
 from typing import Any, Literal, NamedTuple, get_args
 
-from phytrace_edge.ingest import handlers, rosout, status
+from phytrace_edge.ingest import handlers, robot_status, rosout
 from phytrace_edge.ingest.readings import Reading
 
 Domain = Literal[
@@ -85,7 +85,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec(
         "/diagnostics",
         "diagnostic_msgs/msg/DiagnosticArray",
-        status.handle_diagnostic_array,
+        robot_status.handle_diagnostic_array,
         ("operational",),
         every_message=True,
     ),
@@ -103,7 +103,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec(
         "/delivery/status",
         "std_msgs/msg/String",
-        status.handle_delivery_status,
+        robot_status.handle_delivery_status,
         ("operational", "payload"),
         every_message=True,
         latched=True,

@@ -18,14 +18,14 @@ from typing import Any
 import orjson
 
 from phytrace_edge.errors import QueueError, QueueFullError
-from phytrace_edge.queue.caps import Caps, wal_reserve
-from phytrace_edge.queue.codecs import Codecs, Encoded
-from phytrace_edge.queue.database import Database, bump_counters
-from phytrace_edge.queue.frames import SEAL_AFTER_S, Sealer
-from phytrace_edge.queue.full_disk import FullDisk
+from phytrace_edge.queue.encoding.codecs import Codecs, Encoded
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, Sealer
 from phytrace_edge.queue.records import PutResult
-from phytrace_edge.queue.repair import ClockKeeper
-from phytrace_edge.queue.rows import NewRow, insert_rows
+from phytrace_edge.queue.space.caps import Caps, wal_reserve
+from phytrace_edge.queue.space.full_disk import FullDisk
+from phytrace_edge.queue.storage.database import Database, bump_counters
+from phytrace_edge.queue.storage.rows import NewRow, insert_rows
+from phytrace_edge.queue.timekeeping.repair import ClockKeeper
 
 log = logging.getLogger(__name__)
 
@@ -132,7 +132,7 @@ class Appender:
                 ],
                 queued_total=len(rows),  # every event put, whatever the caps did with it
             )
-            if self._clocks:  # stamped before a step already recorded (queue/repair.py)
+            if self._clocks:  # stamped before a step already recorded (queue/timekeeping/repair.py)
                 self._clocks.repair_put(cursor, len(accepted))
             bump_counters(cursor, **{"drop:unencodable": unencodable, "queued_total": unencodable})
         if upkeep:

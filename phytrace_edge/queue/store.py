@@ -25,32 +25,34 @@ from pathlib import Path
 from typing import Any
 
 from phytrace_edge.errors import QueueDamagedError, QueueError
-from phytrace_edge.queue import claims, file_watch, leases, maintenance
 from phytrace_edge.queue.appender import Appender
-from phytrace_edge.queue.caps import Caps, VolumeSpace, wal_reserve
-from phytrace_edge.queue.clock import SystemClocks
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import Database, configure
-from phytrace_edge.queue.dead_letters import DeadLetterBox, dead_letter_row
 from phytrace_edge.queue.defaults import (
     DEFAULT_BUSY_TIMEOUT_S,
     DEFAULT_COMPRESSION,
     DEFAULT_LEASE_S,
     DEFAULT_SYNC,
 )
-from phytrace_edge.queue.dictionaries import load_dictionaries
-from phytrace_edge.queue.frames import FRAME_EVENTS, Sealer, decode_rows
-from phytrace_edge.queue.full_disk import FullDisk
-from phytrace_edge.queue.inspect import QueueStats, file_bytes, stats_from
-from phytrace_edge.queue.migrate import migrate
+from phytrace_edge.queue.encoding.codecs import Codecs
+from phytrace_edge.queue.encoding.dictionaries import load_dictionaries
+from phytrace_edge.queue.encoding.frames import FRAME_EVENTS, Sealer, decode_rows
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.ownership import Owner, dead_owners, sweep_dead_owners
+from phytrace_edge.queue.outbound import claims, leases
+from phytrace_edge.queue.outbound.dead_letters import DeadLetterBox, dead_letter_row
+from phytrace_edge.queue.outbound.ownership import Owner, dead_owners, sweep_dead_owners
+from phytrace_edge.queue.peek import QueueStats, file_bytes, stats_from
 from phytrace_edge.queue.records import Batch, DeadLetter, PutResult
-from phytrace_edge.queue.recovery import check_integrity, mark_damaged, open_checked
-from phytrace_edge.queue.repair import ClockKeeper
-from phytrace_edge.queue.reserve import SpaceReserve, warn_if_volume_smaller_than
-from phytrace_edge.queue.service_state import write_service_state
-from phytrace_edge.queue.sqlite_errors import queue_error
+from phytrace_edge.queue.space import maintenance
+from phytrace_edge.queue.space.caps import Caps, VolumeSpace, wal_reserve
+from phytrace_edge.queue.space.full_disk import FullDisk
+from phytrace_edge.queue.space.reserve import SpaceReserve, warn_if_volume_smaller_than
+from phytrace_edge.queue.storage import file_watch
+from phytrace_edge.queue.storage.database import Database, configure
+from phytrace_edge.queue.storage.migrate import migrate
+from phytrace_edge.queue.storage.recovery import check_integrity, mark_damaged, open_checked
+from phytrace_edge.queue.storage.service_state import write_service_state
+from phytrace_edge.queue.storage.sqlite_errors import queue_error
+from phytrace_edge.queue.timekeeping.clock import SystemClocks
+from phytrace_edge.queue.timekeeping.repair import ClockKeeper
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +79,8 @@ class QueueStore:
         self.lease_s = lease_s
         self._owner = Owner(db.path)
         self.codecs = Codecs(compression)
-        # queue time (queue/clock.py) and repairs after a step, unless a test brings a clock
+        # queue time (queue/timekeeping/clock.py) and repairs after a step, unless a
+        # test brings a clock
         self._clocks = (
             None
             if clock
@@ -118,7 +121,7 @@ class QueueStore:
 
         A corrupt or non-SQLite file is moved aside and a fresh queue started (see
         ``recovery``); the store remembers the moved file for ``stats``. Its clock is
-        queue time (``queue/clock.py``) read from ``clocks``; tests of ages pass a
+        queue time (``queue/timekeeping/clock.py``) read from ``clocks``; tests of ages pass a
         ``clock`` of their own instead, and a small ``frame_events`` to see frames form.
         """
         options = {"limits": limits or QueueLimits(), "compression": compression}

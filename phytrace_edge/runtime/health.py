@@ -15,9 +15,9 @@ from typing import Any, NamedTuple, cast
 
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, EXIT_OK, EXIT_UNHEALTHY
-from phytrace_edge.queue.inspect import QueueStats
-from phytrace_edge.queue.volume import LIMIT_VOLUME
-from phytrace_edge.runtime.documents import (
+from phytrace_edge.queue.peek import QueueStats
+from phytrace_edge.queue.space.volume import LIMIT_VOLUME
+from phytrace_edge.runtime.status_documents import (
     Accounting,
     Lanes,
     LinkFigures,

@@ -15,9 +15,9 @@ from typing import Any
 from phytrace_edge.builder.builder import Built
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.ingest.convert import present
-from phytrace_edge.queue.inspect import QueueStats
-from phytrace_edge.runtime.documents import ServiceDocument, StatusReport
+from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.runtime.health import Live, Thresholds, report
+from phytrace_edge.runtime.status_documents import ServiceDocument, StatusReport
 
 EVENT_TYPE_HEALTH = "bridge.health"
 PROBLEMS_MAX = 64

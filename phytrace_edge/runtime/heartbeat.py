@@ -13,10 +13,13 @@ from typing import Any, NamedTuple, cast
 
 from phytrace_edge._version import __version__
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status
-from phytrace_edge.runtime.documents import (
+from phytrace_edge.runtime.options import ServiceOptions
+from phytrace_edge.runtime.outlet import Outlet
+from phytrace_edge.runtime.pipeline import Pipeline
+from phytrace_edge.runtime.status_documents import (
     LedgerFigures,
     LinkFigures,
     QueueFileFigures,
@@ -25,9 +28,6 @@ from phytrace_edge.runtime.documents import (
     StageFigures,
     WriterFigures,
 )
-from phytrace_edge.runtime.options import ServiceOptions
-from phytrace_edge.runtime.outlet import Outlet
-from phytrace_edge.runtime.pipeline import Pipeline
 from phytrace_edge.runtime.supervisor import Supervisor
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.stats import SendStats

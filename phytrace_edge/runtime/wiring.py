@@ -40,7 +40,7 @@ from phytrace_edge.ingest.sources.base import Source
 from phytrace_edge.ingest.sources.registry import create_source
 from phytrace_edge.queue.defaults import OnFull
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.ownership import ServiceLock
+from phytrace_edge.queue.outbound.ownership import ServiceLock
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status, options
 from phytrace_edge.runtime.health_events import HealthEvents

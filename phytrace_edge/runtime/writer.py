@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 
 from phytrace_edge.builder.builder import Built
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.inspect import QueueStats
+from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.runtime.documents import LedgerFigures, WriterFigures
+from phytrace_edge.runtime.status_documents import LedgerFigures, WriterFigures
 
 log = logging.getLogger(__name__)
 

@@ -25,7 +25,7 @@ has its own lease and idempotency key, so two in flight never hold the same even
 A live batch is BATCH_SIZE events; when more wait, requests grow to BACKLOG_BATCH_SIZE
 events (or BATCH_MAX_BYTES of compressed body), in two lanes (``lanes``): the newest
 first after an outage. A batch claimed before a step of the wall clock goes back and
-is sent again with its stamps repaired (``Restamped``; queue/repair.py).
+is sent again with its stamps repaired (``Restamped``; queue/timekeeping/repair.py).
 """
 
 from __future__ import annotations

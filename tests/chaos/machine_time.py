@@ -28,7 +28,7 @@ from typing import Any, NamedTuple
 import pytest
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.inspect import QueueStats, read_stats
+from phytrace_edge.queue.peek import QueueStats, read_stats
 from phytrace_edge.udm.event import parse_timestamp
 from tests.processes import BridgeProcess, StubProcess, python_env
 

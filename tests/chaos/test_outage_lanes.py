@@ -22,7 +22,7 @@ import time
 import httpx
 
 from phytrace_edge.builder.builder import Built
-from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.runtime.options import queue_path
 from phytrace_edge.udm.event import parse_timestamp
 from tests.processes import wait_for

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.queue.store import QueueStore
 from tests.processes import BridgeProcess, python_env, run_cli, wait_for
 

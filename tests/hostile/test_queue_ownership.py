@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.peek import read_stats
 from tests.processes import BridgeProcess, free_port, python_env, status_json, wait_for
 
 TOOK_BACK = "took back the claims"

@@ -27,7 +27,7 @@ from typing import Any
 
 import pytest
 
-from phytrace_edge.queue.inspect import QueueStats, read_stats
+from phytrace_edge.queue.peek import QueueStats, read_stats
 from tests.hostile.volumes import tmpfs
 from tests.processes import BridgeProcess, StubProcess, status_json, wait_for
 

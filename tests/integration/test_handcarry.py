@@ -15,8 +15,8 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
+from phytrace_edge.handcarry.transfer import BATCH_EVENTS, open_handcarry
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.export import BATCH_EVENTS, open_handcarry
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for

@@ -18,8 +18,8 @@ from typing import NoReturn
 
 import pytest
 
+from phytrace_edge.handcarry.transfer import open_handcarry
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.export import open_handcarry
 from phytrace_edge.udm.schema import event_type_schema
 from tests.processes import run_cli
 from tests.udm_events import EVENT_TYPES, every_type
@@ -98,7 +98,7 @@ def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Pa
 def test_the_reader_refuses_what_breaks_a_channel_schema(tmp_path: Path) -> None:
     """The reader's checks can fail: an event its channel's schema refuses is counted."""
     command = node_reader()
-    from phytrace_edge.ship.handcarry import ExportWriter
+    from phytrace_edge.handcarry.format import ExportWriter
 
     path = tmp_path / "bad.mcap"
     good, bad = every_type(2, {"source_id": "amr-1", "source_type": "amr"}, 1_795_300_000.0)

@@ -47,10 +47,19 @@ def only(folder: Path, pattern: str) -> Path:
 def test_the_wheel_holds_the_package_data(dist: Path) -> None:
     names = set(zipfile.ZipFile(only(dist, "*.whl")).namelist())
     expected = {
-        *(f"phytrace_edge/queue/migrations/{m.name}" for m in (ROOT / "migrations").glob("*.sql")),
+        *(
+            f"phytrace_edge/queue/storage/migrations/{m.name}"
+            for m in (ROOT / "migrations").glob("*.sql")
+        ),
         *(
             str(p.relative_to(ROOT))
-            for pattern in ("launch/*", "udm/*.json", "queue/*.zdict", "stub/*.html", "py.typed")
+            for pattern in (
+                "launch/*",
+                "udm/*.json",
+                "queue/encoding/*.zdict",
+                "stub/*.html",
+                "py.typed",
+            )
             for p in (ROOT / "phytrace_edge").glob(pattern)
             if p.is_file() and "__pycache__" not in p.parts
         ),

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.queue.migrate import latest_version
+from phytrace_edge.queue.storage.migrate import latest_version
 from tests.processes import run_cli, status_json
 
 FIXTURES = Path(__file__).parents[1] / "data" / "upgrade"

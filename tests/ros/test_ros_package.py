@@ -155,7 +155,7 @@ FIND_PACKAGE = """
 import runpy, sys, types
 from ament_index_python.packages import get_package_prefix
 import phytrace_edge
-from phytrace_edge.queue.migrate import migration_files
+from phytrace_edge.queue.storage.migrate import migration_files
 
 class Recorded:
     def __init__(self, *args, **kwargs): pass

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import orjson
 
-from phytrace_edge.queue.clock import Instant
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.queue.timekeeping.clock import Instant
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
 

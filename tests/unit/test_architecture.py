@@ -25,11 +25,12 @@ MODULE_STRING = re.compile(r"^phytrace_edge(\.[a-z_0-9]+)+(:\w+)?$")
 # components listed here and, transitively, what those may import.
 DECLARED: dict[str, set[str]] = {
     "package": {"cli", "runtime"},  # phytrace_edge/__init__.py and __main__.py
-    "cli": {"runtime", "stub", "sim"},
+    "cli": {"runtime", "stub", "sim", "handcarry"},
     "runtime": {"config"},
     "config": {"ship", "builder"},
     "ship": {"queue"},
     "queue": set(),
+    "handcarry": {"queue"},
     "builder": {"ingest"},
     "ingest": {"sim"},
     "sim": set(),
@@ -272,17 +273,12 @@ def test_only_the_cli_reads_the_process_environment() -> None:
     assert {m for m in readers if component(m) not in ("cli", "launch")} == set()
 
 
-def test_modules_stay_small_enough_to_read_in_one_sitting() -> None:
-    sizes = {
-        module_name(path): len(path.read_text("utf-8").splitlines())
-        for path in PACKAGE.rglob("*.py")
-    }
-    # the IDL types and the mock's message classes are tables, not logic; the validator
-    # is generated from the schema (tools/generate_validator.py), not read
-    tables = {
-        "phytrace_edge.ingest.sources.dds_types",
-        "phytrace_edge.sim.mock_ros.messages",
-        "phytrace_edge.udm.validator_generated",
-    }
-    large = {m: n for m, n in sizes.items() if n > 400 and m not in tables}
-    assert not large, large
+def test_every_folder_of_code_is_a_package() -> None:
+    """A folder of modules is a component or a concept with a docstring saying what it
+    holds (``__init__.py``), not a bag of files. Module size has no cap: a module is
+    split where its concept splits (docs/architecture.md, "Review rules")."""
+    folders = {path.parent for path in PACKAGE.rglob("*.py") if "__pycache__" not in path.parts}
+    without = sorted(
+        str(f.relative_to(PACKAGE)) for f in folders if not (f / "__init__.py").exists()
+    )
+    assert without == ["launch"]  # launch files are run by `ros2 launch`, not imported

@@ -1,5 +1,5 @@
 """Every repository path a comment or docstring cites exists: a reader sent to
-``docs/queue.md`` or ``queue/clock.py`` finds it there, and a file that moves or goes
+``docs/queue.md`` or ``queue/timekeeping/clock.py`` finds it there, and a file that moves or goes
 takes its citations along (in ``phytrace_edge/``, ``tests/`` and ``tools/``).
 
 A cited path may be relative to the repository (``docs/udm.md``), to the package
@@ -136,7 +136,8 @@ def test_a_false_citation_is_found() -> None:
     of files that are, are not."""
     module = PACKAGE / "ingest" / "sources" / "ros.py"
     text = (
-        "see docs/queue.md, queue/clock.py, ship/tls.EXPIRY_WARNING_S, tests/unit/*.py, "
+        "see docs/queue.md, queue/timekeeping/clock.py, ship/tls.EXPIRY_WARNING_S, "
+        "tests/unit/*.py, "
         "docs/gone.md, queue/gone.py, phycloud_edge/x.py, ../shared/reference/guide.txt, "
         "tests/unit/test_gone_*.py, sensor_msgs/msg/Imu (a ROS type), .venv/bin/python "
         "and sources/sim.py"

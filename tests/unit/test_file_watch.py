@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.queue import file_watch
+from phytrace_edge.queue.storage import file_watch
 from phytrace_edge.queue.store import QueueStore
 
 

@@ -18,10 +18,10 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from phytrace_edge.handcarry.format import DamagedExport, ExportWriter, NotAnExport
+from phytrace_edge.handcarry.reader import open_export
+from phytrace_edge.handcarry.transfer import export_backlog, open_handcarry
 from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship.export import export_backlog, open_handcarry
-from phytrace_edge.ship.handcarry import DamagedExport, ExportWriter, NotAnExport
-from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.schema import event_type_schema
 from tests.handcarry_files import read_all
 from tests.udm_events import EVENT_TYPES, every_type

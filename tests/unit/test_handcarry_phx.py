@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 import zstandard
 
-from phytrace_edge.ship.export import open_handcarry
-from phytrace_edge.ship.handcarry import NotAnExport
-from phytrace_edge.ship.handcarry_phx import open_export
+from phytrace_edge.handcarry.format import NotAnExport
+from phytrace_edge.handcarry.legacy_phx import open_export
+from phytrace_edge.handcarry.transfer import open_handcarry
 from tests.handcarry_files import read_all
 
 FIXTURES = Path(__file__).parents[1] / "data" / "upgrade"

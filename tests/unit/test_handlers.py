@@ -9,7 +9,7 @@ import pytest
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest import handlers as h
-from phytrace_edge.ingest import status
+from phytrace_edge.ingest import robot_status
 from phytrace_edge.sim.mock_ros import messages as m
 from tests.flavours import as_flavour
 
@@ -247,7 +247,7 @@ def test_diagnostics_levels_from_bytes_and_ints(flavour: str) -> None:
         for i, level in enumerate((b"\x00", b"\x01", b"\x02", b"\x03", b"\x07"))
     ]
     msg = m.DiagnosticArray(header=header(frame=""), status=statuses)
-    reading = status.handle_diagnostic_array(as_flavour(msg, flavour))
+    reading = robot_status.handle_diagnostic_array(as_flavour(msg, flavour))
     assert [s["level"] for s in reading["statuses"]] == ["ok", "warn", "error", "stale", "unknown"]
     assert reading["statuses"][2] == {
         "name": "n2",
@@ -289,7 +289,7 @@ def test_delivery_status_json(flavour: str) -> None:
         ' "destination": "dock-B3", "task_type": "delivery", "task_status": "in_progress",'
         ' "robot_state": "autonomous"}'
     )
-    reading = status.handle_delivery_status(as_flavour(m.String(data=data), flavour))
+    reading = robot_status.handle_delivery_status(as_flavour(m.String(data=data), flavour))
     assert reading["payload"] == {
         "order_id": "order-8821",
         "package_id": "pkg-5501",
@@ -312,12 +312,12 @@ def test_delivery_status_json(flavour: str) -> None:
         ("{not json", "bad_json"),
         ("[1, 2]", "not_object"),
         ('"text"', "not_object"),
-        ("x" * (status.DELIVERY_STATUS_MAX_BYTES + 1), "too_large"),
+        ("x" * (robot_status.DELIVERY_STATUS_MAX_BYTES + 1), "too_large"),
     ],
 )
 def test_delivery_status_malformed(data: str, reason: str) -> None:
     with pytest.raises(MalformedMessage) as info:
-        status.handle_delivery_status(m.String(data=data))
+        robot_status.handle_delivery_status(m.String(data=data))
     assert info.value.reason == reason
 
 
@@ -325,6 +325,6 @@ def test_delivery_status_wrong_field_types_keep_the_rest() -> None:
     data = (
         '{"order_id": 8821, "state": ["x"], "destination": "' + "d" * 300 + '", "task_type": 1.5}'
     )
-    reading = status.handle_delivery_status(m.String(data=data))
+    reading = robot_status.handle_delivery_status(m.String(data=data))
     assert reading["payload"] == {"order_id": "8821"}
     assert sorted(reading["rejected_fields"]) == ["destination", "state", "task_type"]

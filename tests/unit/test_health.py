@@ -5,11 +5,16 @@ from __future__ import annotations
 
 from typing import cast, get_type_hints
 
-from phytrace_edge.queue.inspect import QueueStats, ServiceState
-from phytrace_edge.runtime.documents import Lanes, QueueSection, ServiceDocument, StatusReport
+from phytrace_edge.queue.peek import QueueStats, ServiceState
 from phytrace_edge.runtime.health import Live, Thresholds, accounting, exit_code, report
 from phytrace_edge.runtime.heartbeat import Moment, service_document
 from phytrace_edge.runtime.options import ServiceOptions
+from phytrace_edge.runtime.status_documents import (
+    Lanes,
+    QueueSection,
+    ServiceDocument,
+    StatusReport,
+)
 from phytrace_edge.units import GIB
 
 NOW = 1_800_000_000.0
@@ -131,7 +136,7 @@ def test_unexpected_answers_are_in_status_and_on_its_sent_line() -> None:
 
 
 def test_the_status_report_has_exactly_the_declared_keys() -> None:
-    """StatusReport (runtime/documents.py) is what status --json prints, key for key."""
+    """StatusReport (runtime/status_documents.py) is what status --json prints, key for key."""
     document = report(stats(sender={"last_success_at": NOW - 1}), LIMITS, NOW)
     assert set(document) == set(get_type_hints(StatusReport))
     assert set(document["queue"]) == set(get_type_hints(QueueSection))

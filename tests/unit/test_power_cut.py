@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.queue.reserve import SpaceReserve
+from phytrace_edge.queue.peek import read_stats
+from phytrace_edge.queue.space.reserve import SpaceReserve
 from phytrace_edge.queue.store import QueueStore
 from tests.processes import run_cli
 from tests.unit.queue_fixtures import Clock, event

@@ -12,17 +12,17 @@ from pathlib import Path
 import orjson
 import pytest
 
+from phytrace_edge.handcarry.reader import open_export
+from phytrace_edge.handcarry.transfer import export_backlog
 from phytrace_edge.host_clock import synchronized
-from phytrace_edge.queue import repair
-from phytrace_edge.queue.clock import Instant, LastSeen, Step, boot_base
-from phytrace_edge.queue.frames import SEAL_AFTER_S
-from phytrace_edge.queue.inspect import read_stats
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.repair import stamped_before
+from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.queue.timekeeping import repair
+from phytrace_edge.queue.timekeeping.clock import Instant, LastSeen, Step, boot_base
+from phytrace_edge.queue.timekeeping.repair import stamped_before
 from phytrace_edge.runtime.health import Thresholds, report
-from phytrace_edge.ship.export import export_backlog
-from phytrace_edge.ship.handcarry_reader import open_export
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs, stamped

@@ -9,10 +9,10 @@ import sqlite3
 import orjson
 import pytest
 
-from phytrace_edge.queue.frames import SEAL_AFTER_S, event_id_of, split_frame
-from phytrace_edge.queue.migrate import migrate
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, event_id_of, split_frame
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import DeadLetter
+from phytrace_edge.queue.storage.migrate import migrate
 from phytrace_edge.units import MIB
 from tests.unit.queue_fixtures import Clock, event, seqs
 

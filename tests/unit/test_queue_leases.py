@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from phytrace_edge.queue.leases import gaps
+from phytrace_edge.queue.outbound.leases import gaps
 
 
 @pytest.mark.parametrize(

@@ -36,9 +36,9 @@ from hypothesis.stateful import (
     rule,
 )
 
-from phytrace_edge.queue.claims import BAND_S
-from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, decode_rows
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.outbound.claims import BAND_S
 from phytrace_edge.queue.records import Batch, DeadLetter
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import GIB, KIB, MIB

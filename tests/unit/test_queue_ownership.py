@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.ownership import Owner, ServiceLock, dead_owners, is_alive
+from phytrace_edge.queue.outbound.ownership import Owner, ServiceLock, dead_owners, is_alive
 
 
 def relative(queue: Path, monkeypatch: pytest.MonkeyPatch) -> Path:

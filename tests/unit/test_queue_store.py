@@ -20,13 +20,13 @@ import pytest
 import zstandard
 
 from phytrace_edge.errors import QueueBusyError, QueueError
-from phytrace_edge.queue import recovery
-from phytrace_edge.queue.codecs import GZIP, NONE, ZSTD_DICT
-from phytrace_edge.queue.inspect import read_stats
-from phytrace_edge.queue.migrate import migrate, migration_files
+from phytrace_edge.queue.encoding.codecs import GZIP, NONE, ZSTD_DICT
 from phytrace_edge.queue.options import QueueLimits
+from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.queue.records import DeadLetter, PutResult
-from phytrace_edge.queue.recovery import connect
+from phytrace_edge.queue.storage import recovery
+from phytrace_edge.queue.storage.migrate import migrate, migration_files
+from phytrace_edge.queue.storage.recovery import connect
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import MIB
 from tests.processes import wait_for
@@ -539,8 +539,8 @@ def test_the_on_full_policy_is_read_once_into_its_type() -> None:
 def test_the_walk_over_unleased_rows(open_store, clock: Clock) -> None:
     """``leases.unleased``: every row outside live leases, chunk by chunk, oldest or
     newest first, from an id on, going on after rows the caller deleted."""
-    from phytrace_edge.queue import leases
-    from phytrace_edge.queue.rows import delete_range
+    from phytrace_edge.queue.outbound import leases
+    from phytrace_edge.queue.storage.rows import delete_range
 
     store = open_store(frame_events=1)  # one row per event
     store.put_many([event(i) for i in range(10)])

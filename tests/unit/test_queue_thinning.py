@@ -12,7 +12,7 @@ import orjson
 import pytest
 
 from phytrace_edge.cli.status import render_status
-from phytrace_edge.queue.frames import SEAL_AFTER_S, decode_rows, split_frame
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, decode_rows, split_frame
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import QueuedEvent
 from phytrace_edge.runtime.health import Thresholds, report

@@ -1,4 +1,4 @@
-"""Space is judged by the volume's real free space (``queue/volume.py``): a missing
+"""Space is judged by the volume's real free space (``queue/space/volume.py``): a missing
 reserve on a roomy disk is no full disk, a folder that is gone is "unknown" and never a
 crash or a drop, a write that fails for another reason never evicts, the caps follow
 the volume when it holds less than QUEUE_MAX_BYTES, and ``status`` judges the queue's
@@ -17,10 +17,10 @@ import pytest
 
 from phytrace_edge.cli.status import render_status
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue import caps, reserve
-from phytrace_edge.queue.inspect import QueueStats, file_bytes
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.volume import (
+from phytrace_edge.queue.peek import QueueStats, file_bytes
+from phytrace_edge.queue.space import caps, reserve
+from phytrace_edge.queue.space.volume import (
     LIMIT_SETTING,
     LIMIT_VOLUME,
     Volume,

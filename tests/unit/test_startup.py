@@ -58,7 +58,7 @@ def test_status_reads_a_real_queue_without_the_store(tmp_path: Path) -> None:
     with QueueStore.open(tmp_path / "q.db") as store:
         store.put({"event_id": "e1"})
     loaded = modules_after("status", "--json", QUEUE_PATH=str(tmp_path / "q.db"))
-    assert "phytrace_edge.queue.inspect" in loaded and "sqlite3" in loaded
+    assert "phytrace_edge.queue.peek" in loaded and "sqlite3" in loaded
     assert "phytrace_edge.queue.store" not in loaded  # the writer's side: not for reading
     assert third_party(loaded) == []
 

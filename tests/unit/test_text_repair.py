@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.ingest import handlers as h
-from phytrace_edge.ingest import rosout, status
+from phytrace_edge.ingest import robot_status, rosout
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.topics import ExtraTopic
 from phytrace_edge.sim.mock_ros import messages as m
@@ -81,7 +81,7 @@ def test_a_lone_surrogate_in_a_delivery_status_key_is_repaired_and_counted() -> 
     bridge = Bridge()
     text = '{"order_id": "o-1", "state": "loading", "\\udfff": {"\\ud800x": ["\\udc00"]}}'
 
-    reading = status.handle_delivery_status(delivery(text))
+    reading = robot_status.handle_delivery_status(delivery(text))
     assert reading["text_repaired"] == 3  # the key, the nested key, the nested value
     bridge.dispatcher.on_message("/delivery/status", delivery(text))
 
@@ -104,7 +104,7 @@ def test_a_lone_surrogate_in_a_delivery_status_key_is_repaired_and_counted() -> 
 )
 def test_delivery_status_text_that_is_not_utf8(data: Any, expected_state: str) -> None:
     msg = type("Msg", (), {"data": data})()  # any flavour's String: str, or bytes
-    reading = status.handle_delivery_status(msg)
+    reading = robot_status.handle_delivery_status(msg)
     assert reading["payload"]["delivery_state"] == expected_state
     assert reading.get("text_repaired", 0) == (0 if expected_state == "😀" else 1)
 
@@ -146,7 +146,7 @@ def test_diagnostics_names_messages_and_hardware_ids_are_repaired(flavour: str) 
     ]
     msg = m.DiagnosticArray(header=m.Header(frame_id=BROKEN), status=statuses)
 
-    reading = status.handle_diagnostic_array(as_flavour(msg, flavour))
+    reading = robot_status.handle_diagnostic_array(as_flavour(msg, flavour))
     assert reading["text_repaired"] == 4  # the frame id and three fields of one status
     bridge.dispatcher.on_message("/diagnostics", as_flavour(msg, flavour))
 

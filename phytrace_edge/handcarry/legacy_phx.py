@@ -27,7 +27,7 @@ from typing import Any
 import orjson
 import zstandard
 
-from phytrace_edge.ship.handcarry import DamagedExport, Manifest, NotAnExport
+from phytrace_edge.handcarry.format import DamagedExport, Manifest, NotAnExport
 
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 FORMAT_VERSION = 1

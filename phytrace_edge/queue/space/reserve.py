@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 
 from phytrace_edge.durable import sync_folder
-from phytrace_edge.queue.volume import (
+from phytrace_edge.queue.space.volume import (
     MIN_RESERVE_BYTES,
     RESERVE_SHARE_OF_VOLUME,
     effective_cap,

@@ -6,8 +6,8 @@ readable after an upgrade ships a new packaged dictionary.
 
 from __future__ import annotations
 
-from phytrace_edge.queue.codecs import Codecs, packaged_dictionary
-from phytrace_edge.queue.database import Database
+from phytrace_edge.queue.encoding.codecs import Codecs, packaged_dictionary
+from phytrace_edge.queue.storage.database import Database
 
 
 def load_dictionaries(db: Database, codecs: Codecs, now: float) -> None:

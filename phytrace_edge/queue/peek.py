@@ -17,9 +17,9 @@ import time
 from typing import Any, NamedTuple
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.clock import queue_time_now
-from phytrace_edge.queue.sqlite_errors import queue_error
-from phytrace_edge.queue.volume import Cap, Volume, effective_cap, look_at
+from phytrace_edge.queue.space.volume import Cap, Volume, effective_cap, look_at
+from phytrace_edge.queue.storage.sqlite_errors import queue_error
+from phytrace_edge.queue.timekeeping.clock import queue_time_now
 
 READ_TIMEOUT_S = 5.0
 DAMAGED_SUFFIX = ".damaged"  # written by ``recovery`` when a check finds damage
@@ -34,7 +34,7 @@ class ServiceState(NamedTuple):
 
 
 class ClockState(NamedTuple):
-    """The machine's clock as the queue last saw it (``queue/clock.py``)."""
+    """The machine's clock as the queue last saw it (``queue/timekeeping/clock.py``)."""
 
     wall_offset: float  # wall clock minus queue time when read: turns queue times into dates
     synchronized: bool | None  # at the last record; None for a queue from before queue time

@@ -24,10 +24,10 @@ from collections.abc import Iterator, Sequence
 
 import orjson
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.codecs import Codecs
+from phytrace_edge.queue.encoding.codecs import Codecs
+from phytrace_edge.queue.outbound import leases
 from phytrace_edge.queue.records import QueuedEvent
-from phytrace_edge.queue.rows import FRAMED_COLUMNS, FramedRow, StoredRow
+from phytrace_edge.queue.storage.rows import FRAMED_COLUMNS, FramedRow, StoredRow
 
 FRAME_EVENTS = 100
 SEAL_AFTER_S = 10.0

@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 from phytrace_edge.durable import sync_folder
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.database import Database
+from phytrace_edge.queue.storage.database import Database
 
 log = logging.getLogger(__name__)
 

@@ -21,15 +21,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import bump_counters
 from phytrace_edge.queue.defaults import OnFull
-from phytrace_edge.queue.inspect import file_bytes
+from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.options import QueueLimits
-from phytrace_edge.queue.rows import delete_range, depth_and_used_bytes
-from phytrace_edge.queue.thinning import thin_oldest
-from phytrace_edge.queue.volume import LIMIT_VOLUME, Cap, Volume, effective_cap, look_at, wal_share
+from phytrace_edge.queue.outbound import leases
+from phytrace_edge.queue.peek import file_bytes
+from phytrace_edge.queue.space.thinning import thin_oldest
+from phytrace_edge.queue.space.volume import (
+    LIMIT_VOLUME,
+    Cap,
+    Volume,
+    effective_cap,
+    look_at,
+    wal_share,
+)
+from phytrace_edge.queue.storage.database import bump_counters
+from phytrace_edge.queue.storage.rows import delete_range, depth_and_used_bytes
 
 ROW_OVERHEAD_BYTES = 96  # event_id, numbers, record and cell headers of one row
 PAGE_FILL = 1.15  # B-tree pages are not full: bytes on disk per byte stored

@@ -10,7 +10,7 @@ from typing import Any
 
 import orjson
 
-from phytrace_edge.queue.database import Database
+from phytrace_edge.queue.storage.database import Database
 
 
 def write_service_state(

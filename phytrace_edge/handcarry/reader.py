@@ -18,7 +18,7 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, DataEnd, Footer, Header, Message, Metadata, Statistics
 from mcap.stream_reader import StreamReader
 
-from phytrace_edge.ship.handcarry import (
+from phytrace_edge.handcarry.format import (
     EXPORT_RECORD,
     MANIFEST_RECORD,
     MCAP_MAGIC,

@@ -8,7 +8,7 @@ import sqlite3
 from collections.abc import Iterator
 from typing import Any, NamedTuple
 
-from phytrace_edge.queue.rows import MAX_ID
+from phytrace_edge.queue.storage.rows import MAX_ID
 
 
 def free_ranges(cursor: sqlite3.Cursor, now: float) -> list[tuple[int, int]]:

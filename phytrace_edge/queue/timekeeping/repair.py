@@ -42,11 +42,11 @@ from typing import Any, NamedTuple
 
 import orjson
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.clock import Step, SystemClocks, open_queue_time
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import Database, bump_counters
-from phytrace_edge.queue.frames import split_frame
+from phytrace_edge.queue.encoding.codecs import Codecs
+from phytrace_edge.queue.encoding.frames import split_frame
+from phytrace_edge.queue.outbound import leases
+from phytrace_edge.queue.storage.database import Database, bump_counters
+from phytrace_edge.queue.timekeeping.clock import Step, SystemClocks, open_queue_time
 from phytrace_edge.udm.event import format_timestamp, parse_timestamp
 
 log = logging.getLogger(__name__)

@@ -14,11 +14,11 @@ from typing import IO, Any
 
 import orjson
 
-from phytrace_edge.queue.caps import Caps
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import Database, bump_counters
+from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.records import DeadLetter, DeadLetterRow, QueuedEvent
-from phytrace_edge.queue.rows import NewRow, insert_rows
+from phytrace_edge.queue.space.caps import Caps
+from phytrace_edge.queue.storage.database import Database, bump_counters
+from phytrace_edge.queue.storage.rows import NewRow, insert_rows
 
 _COLUMNS = "id, event_id, queued_at, dead_at, reason, status_code, response, json_size"
 

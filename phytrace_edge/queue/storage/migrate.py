@@ -18,7 +18,7 @@ _NUMBERED = re.compile(r"^(\d{4})_[a-z0-9_]+\.sql$")
 def migrations_dir() -> Path:
     """The packaged migrations, or the repository's folder in a source checkout."""
     packaged = Path(__file__).with_name("migrations")
-    return packaged if packaged.is_dir() else Path(__file__).parents[2] / "migrations"
+    return packaged if packaged.is_dir() else Path(__file__).parents[3] / "migrations"
 
 
 def migration_files(folder: Path | None = None) -> list[tuple[int, Path]]:

@@ -27,9 +27,9 @@ import time
 from pathlib import Path
 
 from phytrace_edge.errors import QueueBusyError, QueueError
-from phytrace_edge.queue.inspect import DAMAGED_SUFFIX
-from phytrace_edge.queue.migrate import latest_version
-from phytrace_edge.queue.sqlite_errors import (
+from phytrace_edge.queue.peek import DAMAGED_SUFFIX
+from phytrace_edge.queue.storage.migrate import latest_version
+from phytrace_edge.queue.storage.sqlite_errors import (
     SQLITE_BUSY,
     SQLITE_CORRUPT,
     SQLITE_LOCKED,

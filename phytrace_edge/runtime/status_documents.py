@@ -81,7 +81,7 @@ class LedgerFigures(TypedDict):
 
 
 class QueueFileFigures(TypedDict, total=False):
-    """Whether the queue file is still where QUEUE_PATH says (``queue/file_watch.py``)."""
+    """Whether the queue file is still where QUEUE_PATH says (``queue/storage/file_watch.py``)."""
 
     state: str  # ok, deleted, moved, replaced, folder_gone
     detail: str | None  # what happened and what the bridge did, one line

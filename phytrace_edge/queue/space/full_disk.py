@@ -23,9 +23,14 @@ import time
 from pathlib import Path
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.caps import LOOK_EVERY_S, ROW_OVERHEAD_BYTES, VolumeSpace, drop_oldest
-from phytrace_edge.queue.database import Database, bump_counters
-from phytrace_edge.queue.volume import wal_share
+from phytrace_edge.queue.space.caps import (
+    LOOK_EVERY_S,
+    ROW_OVERHEAD_BYTES,
+    VolumeSpace,
+    drop_oldest,
+)
+from phytrace_edge.queue.space.volume import wal_share
+from phytrace_edge.queue.storage.database import Database, bump_counters
 
 log = logging.getLogger(__name__)
 

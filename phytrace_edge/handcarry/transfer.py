@@ -20,16 +20,18 @@ from pathlib import Path
 from typing import Any
 
 from phytrace_edge.errors import QueueError
-from phytrace_edge.queue.records import Batch
-from phytrace_edge.queue.store import QueueStore
-from phytrace_edge.ship import handcarry, handcarry_phx, handcarry_reader
-from phytrace_edge.ship.handcarry import (
+from phytrace_edge.handcarry import format as handcarry
+from phytrace_edge.handcarry import legacy_phx as handcarry_phx
+from phytrace_edge.handcarry import reader as handcarry_reader
+from phytrace_edge.handcarry.format import (
     CHUNK_BYTES,
     DamagedExport,
     ExportWriter,
     Manifest,
     NotAnExport,
 )
+from phytrace_edge.queue.records import Batch
+from phytrace_edge.queue.store import QueueStore
 
 # a batch is a chunk of the file: zstd compresses a day of events 10% better in 4 MiB
 # chunks than in 1 MiB ones (docs/operations.md, "Hand-carry")
@@ -55,7 +57,7 @@ def export_backlog(
         if not store.stepped_since(batches[0].claimed_at):
             break
         # the wall clock stepped while the file was written: the queue has repaired the
-        # stamps of the events written before it (queue/repair.py), so write them again
+        # stamps of the events written before it (queue/timekeeping/repair.py), so write them again
         _release(store, batches)
     try:
         _verify(path, manifest)

@@ -39,7 +39,7 @@ class Encoded:
 @functools.cache
 def packaged_dictionary() -> tuple[int, bytes]:
     """The zstd dictionary shipped with this version: (dict_id, content)."""
-    content = resources.files("phytrace_edge.queue").joinpath(DICTIONARY_FILE).read_bytes()
+    content = resources.files("phytrace_edge.queue.encoding").joinpath(DICTIONARY_FILE).read_bytes()
     return zstandard.ZstdCompressionDict(content).dict_id(), content
 
 

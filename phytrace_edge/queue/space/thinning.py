@@ -25,11 +25,11 @@ import sqlite3
 from dataclasses import dataclass, field
 from typing import Any
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import bump_counters
-from phytrace_edge.queue.frames import SEAL_AFTER_S, event_id_of, split_frame
-from phytrace_edge.queue.rows import THINNED_COLUMNS, ThinnedRow
+from phytrace_edge.queue.encoding.codecs import Codecs
+from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, event_id_of, split_frame
+from phytrace_edge.queue.outbound import leases
+from phytrace_edge.queue.storage.database import bump_counters
+from phytrace_edge.queue.storage.rows import THINNED_COLUMNS, ThinnedRow
 
 MAX_THIN_LEVEL = 6  # 1 in 64
 STEP_ROWS = 256

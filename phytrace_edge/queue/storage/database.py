@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from phytrace_edge.errors import QueueDamagedError, QueueError, QueueFullError
-from phytrace_edge.queue.recovery import connect, mark_damaged
-from phytrace_edge.queue.reserve import SpaceReserve
-from phytrace_edge.queue.sqlite_errors import queue_error
+from phytrace_edge.queue.space.reserve import SpaceReserve
+from phytrace_edge.queue.storage.recovery import connect, mark_damaged
+from phytrace_edge.queue.storage.sqlite_errors import queue_error
 
 T = TypeVar("T")
 _NORMAL = 1  # PRAGMA synchronous: 0 OFF, 1 NORMAL, 2 FULL, 3 EXTRA

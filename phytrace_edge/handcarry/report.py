@@ -7,9 +7,9 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from phytrace_edge.ship import handcarry_reader
-from phytrace_edge.ship.export import open_handcarry
-from phytrace_edge.ship.handcarry import DamagedExport, Manifest
+from phytrace_edge.handcarry import reader as handcarry_reader
+from phytrace_edge.handcarry.format import DamagedExport, Manifest
+from phytrace_edge.handcarry.transfer import open_handcarry
 from phytrace_edge.udm.event import parse_timestamp
 
 

@@ -9,12 +9,12 @@ import sqlite3
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.codecs import Codecs
-from phytrace_edge.queue.database import bump_counters
-from phytrace_edge.queue.frames import decode_rows
+from phytrace_edge.queue.encoding.codecs import Codecs
+from phytrace_edge.queue.encoding.frames import decode_rows
+from phytrace_edge.queue.outbound import leases
 from phytrace_edge.queue.records import Batch, DeadLetterRow
-from phytrace_edge.queue.rows import (
+from phytrace_edge.queue.storage.database import bump_counters
+from phytrace_edge.queue.storage.rows import (
     SIZE_COLUMNS,
     STORED_COLUMNS,
     RowSize,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import sqlite3
 
-from phytrace_edge.queue import leases
-from phytrace_edge.queue.database import Database, bump_counters
-from phytrace_edge.queue.rows import delete_range
+from phytrace_edge.queue.outbound import leases
+from phytrace_edge.queue.storage.database import Database, bump_counters
+from phytrace_edge.queue.storage.rows import delete_range
 from phytrace_edge.units import MIB
 
 EXPIRE_CHUNK = 1000

@@ -7,7 +7,7 @@ import sqlite3
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from phytrace_edge.queue.database import bump_counters
+from phytrace_edge.queue.storage.database import bump_counters
 
 MAX_ID = 2**63 - 1
 
