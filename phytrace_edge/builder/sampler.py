@@ -4,6 +4,12 @@ Every input uses it. Live inputs (rclpy, Cyclone DDS, the real-time simulator) l
 ``Sampler.run`` keep the rate on the monotonic clock, in a thread of its own, so wall
 clock jumps and sim time never stretch or squeeze it. Inputs that keep their own time
 (a bag replayed on its timeline, the simulator in virtual time) call ``tick`` themselves.
+
+A tick goes one way: the input's take returns the newest samples of the state topics
+it reads at the tick, the sampler hands them to the dispatcher (which gives the
+builder their readings), then the builder builds. Both are callables given at wiring
+(``TickInput``), so the sampler knows nothing of the input or the dispatcher, and the
+input never calls back into the dispatcher or the builder.
 """
 
 from __future__ import annotations
@@ -11,19 +17,33 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Generic, TypeVar
 
 from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.builder.builder import Built, UDMBuilder
 
 Event = dict[str, Any]
+Taken = TypeVar("Taken")
+
+
+@dataclass(frozen=True)
+class TickInput(Generic[Taken]):
+    """What an input reads at the tick, and where that goes: ``take`` (the input's
+    ``before_tick``) takes the newest sample of each state topic and returns them;
+    ``dispatch`` (the dispatcher's ``on_taken``) turns them into the builder's
+    readings. The type of what is taken is theirs: the sampler only passes it on."""
+
+    take: Callable[[], Taken]
+    dispatch: Callable[[Taken], None]
 
 
 class Sampler:
     """Builds one event per tick and hands it, with its class, to ``emit``.
 
-    ``before_tick`` runs first on every tick: an input that reads its state topics at
-    the tick (instead of on every message) takes their newest samples there.
+    An input that reads its state topics at the tick (instead of on every message)
+    gives a ``TickInput``: on every tick, first its take, handed to the dispatcher,
+    then the build, which sees what was taken.
     """
 
     def __init__(
@@ -31,13 +51,13 @@ class Sampler:
         builder: UDMBuilder,
         emit: Callable[[Built], None],
         rate_hz: float,
-        before_tick: Callable[[], None] | None = None,
+        tick_input: TickInput[Any] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.builder = builder
         self.period_s = 1.0 / rate_hz
         self._emit = emit
-        self._before_tick = before_tick
+        self._input = tick_input
         self._monotonic = monotonic
         self.ticks = 0
 
@@ -46,8 +66,9 @@ class Sampler:
         clock (a replay's timeline). The side events (logs, extra topics) go first. An
         event with no domain (nothing fresh was heard)
         is not worth sending: it is not emitted, and the tick returns False."""
-        if self._before_tick is not None:
-            self._before_tick()
+        if self._input is not None:
+            taken = self._input.take()  # the input only takes: it calls nothing back
+            self._input.dispatch(taken)  # the readings reach the builder before it builds
         self.ticks += 1
         self.flush_side_events(captured_at_s)
         built = self.builder.build(captured_at_s)

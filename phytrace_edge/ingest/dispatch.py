@@ -1,11 +1,18 @@
 """The one place handlers are called: message in, reading to the builder, rejects counted.
 
-Every source (rclpy, DDS, bag replay, simulator) calls ``Dispatcher.on_message`` for
-each message, and ``on_unreadable`` for one it could not decode (a bag's record whose
-text is not UTF-8). A message a handler rejects is counted by (topic, reason) and
-logged at WARNING at most once a minute per pair, so a topic that publishes garbage at
-100 Hz cannot flood the log; it never stops the other topics. A message whose text had
-to be repaired (``safe_text.py``) is kept, and counted and logged the same way under
+Messages come in two ways, both ending in ``on_message`` (and in ``on_unreadable`` for
+one the input could not decode: a bag's record whose text is not UTF-8). A message an
+input is called back with as it arrives (an every-message topic, a bag's record) it
+hands to ``Dispatcher.on_message`` itself. The newest messages of the state topics,
+which the ros and dds inputs take at the sample tick, the input only returns (from
+``before_tick``, as ``Take`` values); the sampler hands them to ``on_taken``, then
+builds the tick's event, so the input never calls the dispatcher or the builder from
+inside the tick.
+
+A message a handler rejects is counted by (topic, reason) and logged at WARNING at
+most once a minute per pair, so a topic that publishes garbage at 100 Hz cannot flood
+the log; it never stops the other topics. A message whose text had to be repaired
+(``safe_text.py``) is kept, and counted and logged the same way under
 ``text_repaired``.
 """
 
@@ -15,8 +22,9 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeAlias
 
 from phytrace_edge.errors import MalformedMessage
 from phytrace_edge.ingest.readings import Reading
@@ -26,6 +34,30 @@ from phytrace_edge.ingest.topics import TOPICS
 log = logging.getLogger(__name__)
 
 LOG_EVERY_S = 60.0
+
+
+@dataclass(frozen=True)
+class TakenMessage:
+    """A message an input took at the sample tick: its canonical topic (or extra
+    topic's name), the message, and how long ago the middleware received it
+    (``sources.base.age_at_take``: the reception stamp, bounded by the wait)."""
+
+    topic: str
+    message: Any
+    age_s: float
+
+
+@dataclass(frozen=True)
+class TakenUnreadable:
+    """A sample an input took at the sample tick and could not decode (the dds input's
+    ``undecodable``): counted with its topic's rejects."""
+
+    topic: str
+    reason: str
+    detail: str
+
+
+Take: TypeAlias = TakenMessage | TakenUnreadable
 
 
 class Dispatcher:
@@ -76,6 +108,16 @@ class Dispatcher:
                 what="text repaired, message kept",
             )
         self._on_reading(topic, reading, age_s)
+
+    def on_taken(self, takes: Sequence[Take]) -> None:
+        """What an input took at the sample tick (its ``before_tick``), handed over by
+        the sampler before it builds the tick's event, in the order taken: a message
+        as ``on_message`` with its age, an unreadable sample as ``on_unreadable``."""
+        for take in takes:
+            if isinstance(take, TakenMessage):
+                self.on_message(take.topic, take.message, take.age_s)
+            else:
+                self.on_unreadable(take.topic, take.reason, take.detail)
 
     def on_unreadable(self, topic: str, reason: str, detail: str) -> None:
         """A message of canonical ``topic`` the input could not decode: received, and

@@ -1,10 +1,12 @@
 """The pipeline: source -> dispatcher -> builder -> sampler -> emit.
 
 ``runtime/wiring.py`` builds it, the same for ``run`` (where ``emit`` is the queue
-writer), ``run_simulation`` (a sink) and the tests. The source hands every message to
-the dispatcher, which calls the topic's handler and gives the reading to the builder;
-the sampler builds one event per tick from the builder's latest readings and gives it
-to ``emit``. A live input ticks on the sampler's own loop; an input that keeps its own
+writer), ``run_simulation`` (a sink) and the tests. The source hands every message
+that arrives by callback to the dispatcher, which calls the topic's handler and gives
+the reading to the builder; at each tick the sampler takes the newest samples of the
+state topics from the source (``before_tick``, which returns them), hands them to the
+dispatcher, then builds one event from the builder's latest readings and gives it to
+``emit``. A live input ticks on the sampler's own loop; an input that keeps its own
 time (a bag on its timeline, the simulator in virtual time) ticks from its loop.
 """
 

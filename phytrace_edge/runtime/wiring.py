@@ -12,6 +12,7 @@ each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
                              -> builder -> ingest -> sim
+    cli -> handcarry -> queue
     everything -> udm, units, redact, errors, _version, host_clock, host_memory, durable
 
 ``stub`` (the PhyCloud dev stub) stands apart: only the CLI starts it, and it uses only
@@ -31,7 +32,7 @@ from typing import Any
 
 from phytrace_edge import host_clock
 from phytrace_edge.builder.builder import Built, UDMBuilder
-from phytrace_edge.builder.sampler import Sampler
+from phytrace_edge.builder.sampler import Sampler, TickInput
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import QueueError
 from phytrace_edge.host_memory import give_back_free_memory
@@ -65,14 +66,18 @@ STAGING_LEASE_S = 600.0  # a chunk of a file is sent before its claims lapse
 
 
 def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -> Pipeline:
-    """``source`` -> dispatcher -> builder -> sampler -> ``emit``."""
+    """``source`` -> dispatcher -> builder -> sampler -> ``emit``. At each tick the
+    sampler takes from the source (``before_tick``) and hands what it took to the
+    dispatcher, then builds: one way, the source calling nothing back."""
     # a bag's events carry bag time: only this machine's clock can be unsynchronized
     unsynchronized = None if source.keeps_time else host_clock.unsynchronized
     builder = UDMBuilder(
         options.builder_options(s), source.clock, source.field_types, unsynchronized
     )
-    sampler = Sampler(builder, emit, s.sample_rate_hz, before_tick=source.before_tick)
-    return Pipeline(source, Dispatcher(builder.add_reading, builder.add_message), builder, sampler)
+    dispatcher = Dispatcher(builder.add_reading, builder.add_message)
+    tick_input = TickInput(source.before_tick, dispatcher.on_taken)
+    sampler = Sampler(builder, emit, s.sample_rate_hz, tick_input)
+    return Pipeline(source, dispatcher, builder, sampler)
 
 
 def simulation_pipeline(

@@ -19,12 +19,13 @@ import logging
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.generic import rosbags_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
@@ -253,8 +254,9 @@ class BagSource:
     def field_types(self, msg: Any) -> Mapping[str, str]:
         return self._field_types(msg)
 
-    def before_tick(self) -> None:
+    def before_tick(self) -> Sequence[Take]:
         """The replay feeds every message itself: nothing to take at the tick."""
+        return []
 
     def stop(self) -> None:
         """The reader is closed by the replay itself."""

@@ -1,19 +1,23 @@
 """What every input has in common: its options, where it delivers, and its protocol.
 
-A source turns the outside world into ``(topic, message)`` calls of ``Feed.on_message``;
-it never builds events itself. The one tick loop (``builder.sampler``) builds them: in
-a thread of its own for live inputs, or called through ``Feed.tick`` by an input that
-keeps its own time (a bag on its timeline, the simulator in virtual time).
+A source turns the outside world into ``(topic, message)`` calls of ``Feed.on_message``
+as messages arrive, and, at the sample tick, into what ``Source.before_tick`` returns
+(the newest samples of the state topics, as ``dispatch.Take`` values, which the sampler
+hands to the dispatcher); it never builds events itself. The one tick loop
+(``builder.sampler``) builds them: in a thread of its own for live inputs, or called
+through ``Feed.tick`` by an input that keeps its own time (a bag on its timeline, the
+simulator in virtual time).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from phytrace_edge.ingest.defaults import DEFAULT_REPLAY_RATE
+from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.qos import QosChoice
 
 NODE_NAME = "phytrace_edge"
@@ -107,7 +111,10 @@ class Finished:
 class Source(Protocol):
     """One input. ``start`` opens it (a clear ConfigError when it cannot be), ``run``
     is its loop (supervised: restarted when it raises; returning means a finite input
-    is exhausted), ``stop`` releases it."""
+    is exhausted), ``stop`` releases it. ``before_tick`` runs on the sample tick,
+    before its event is built: it takes the newest sample of each state topic the
+    input reads at the tick and returns them, in order, calling nothing back (the
+    sampler hands them to the dispatcher); an input that takes nothing returns []."""
 
     keeps_time: bool
     clock: SourceClock | None
@@ -120,7 +127,7 @@ class Source(Protocol):
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None: ...
 
-    def before_tick(self) -> None: ...
+    def before_tick(self) -> Sequence[Take]: ...
 
     def stop(self) -> None: ...
 

@@ -36,9 +36,10 @@ wire's names, the domain's configuration and the take loop ``dds_wire.py``.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.generic import FieldTypes, rosbags_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions, always_due
 from phytrace_edge.ingest.sources.dds_readers import DdsReaders
@@ -91,9 +92,8 @@ class DdsSource:
             if stop.wait(GRAPH_CHECK_S):
                 return
 
-    def before_tick(self) -> None:
-        if self._readers is not None:
-            self._readers.take_latest(self._due)
+    def before_tick(self) -> Sequence[Take]:
+        return self._readers.take_latest(self._due) if self._readers is not None else []
 
     def stop(self) -> None:
         if self._readers is not None:

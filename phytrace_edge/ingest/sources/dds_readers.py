@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from phytrace_edge.errors import ConfigError
-from phytrace_edge.ingest.dispatch import LOG_EVERY_S
+from phytrace_edge.ingest.dispatch import LOG_EVERY_S, Take, TakenMessage, TakenUnreadable
 from phytrace_edge.ingest.qos import QosChoice, before_publishers, incompatible, matching_qos
 from phytrace_edge.ingest.sources.base import OnMessage, age_at_take
 from phytrace_edge.ingest.sources.dds_wire import (
@@ -60,7 +60,8 @@ class DdsReaders:
     ``ros`` input's rules (``ingest.qos``: reliable for the every-message topics until
     their writers are known, then what every writer can match; ``TOPIC_QOS``
     overrides). Every-message topics go to ``on_message`` on Cyclone's listener
-    thread, as they arrive; the others at the sample tick (``take_latest``)."""
+    thread, as they arrive; the others are taken at the sample tick and returned
+    (``take_latest``), for the sampler to hand to the dispatcher."""
 
     def __init__(
         self,
@@ -148,7 +149,7 @@ class DdsReaders:
         if read.every_message:
 
             def deliver(reader: Any, name: str = read.name) -> None:
-                self._take(name, reader, READER_DEPTH)
+                self._take(name, reader, READER_DEPTH, self._deliver)
 
             listener = Listener(on_data_available=deliver)
         read.reader = DataReader(self.participant, read.topic, qos=qos, listener=listener)
@@ -207,9 +208,9 @@ class DdsReaders:
             old, read.reader = read.reader, None
             if old is not None and read.every_message:
                 old.set_listener(None)  # no call of its listener runs after this returns
-                self._take(read.name, old, READER_DEPTH)
-            elif old is not None:
-                self._take_latest(read, old)
+                self._take(read.name, old, READER_DEPTH, self._deliver)
+            elif old is not None:  # not at a tick: handed over at once
+                self._take_latest(read, old, self._deliver)
             del old  # the last reference: Cyclone deletes the reader now, on this thread
             self._open(read, choice)
         log.info(
@@ -220,45 +221,58 @@ class DdsReaders:
             choice.describe(),
         )
 
-    def take_latest(self, due: Callable[[str], bool] = lambda name: True) -> None:
-        """Hand over the newest sample of each state topic, if one came since last
-        time; an extra topic's only when it is ``due`` (its rate_hz), so a large one
-        sent once a second is not deserialised at every tick."""
+    def take_latest(self, due: Callable[[str], bool] = lambda name: True) -> list[Take]:
+        """The newest sample of each state topic, if one came since last time, with its
+        age (or, when it could not be decoded, why); an extra topic's only when it is
+        ``due`` (its rate_hz), so a large one sent once a second is not deserialised
+        at every tick. Returned, not handed over: the sampler dispatches them."""
+        takes: list[Take] = []
         with self._lock:
             for read in self._topics.values():
                 if read.every_message or read.reader is None:
                     continue
                 if read.extra and not due(read.name):
                     continue  # left in Cyclone's cache (one sample), not deserialised
-                self._take_latest(read, read.reader)
+                self._take_latest(read, read.reader, takes.append)
+        return takes
 
-    def _take_latest(self, read: ReadTopic, reader: Any) -> None:
-        """The one sample a state topic's ``reader`` keeps, with its age."""
+    def _take_latest(self, read: ReadTopic, reader: Any, put: Callable[[Take], None]) -> None:
+        """The one sample a state topic's ``reader`` keeps, with its age, to ``put``."""
         now = time.monotonic()
         waited_s, read.emptied_at = now - read.emptied_at, now
-        self._take(read.name, reader, 1, waited_s)
+        self._take(read.name, reader, 1, put, waited_s)
 
-    def _take(self, name: str, reader: Any, limit: int, waited_s: float | None = None) -> None:
-        """Up to ``limit`` samples of topic ``name``, one at a time (``take_each``);
-        never raises: it runs on Cyclone's listener thread, where an exception is only
-        printed, and at the sample tick, which must go on for the other topics.
-        ``waited_s``: how long the samples can have waited in the reader (None: they
-        are delivered as they arrive)."""
+    def _take(
+        self,
+        name: str,
+        reader: Any,
+        limit: int,
+        put: Callable[[Take], None],
+        waited_s: float | None = None,
+    ) -> None:
+        """Up to ``limit`` samples of topic ``name``, one at a time (``take_each``),
+        each to ``put`` as it is taken (``_deliver``: handed over now; or kept, for the
+        sampler to dispatch); never raises: it runs on Cyclone's listener thread, where
+        an exception is only printed, and at the sample tick, which must go on for the
+        other topics. ``waited_s``: how long the samples can have waited in the reader
+        (None: they are delivered as they arrive)."""
         try:
             take_each(
                 reader,
                 limit,
-                lambda sample: self._hand_over(name, sample, waited_s),
-                lambda exc: self._on_unreadable(name, UNDECODABLE, f"{type(exc).__name__}: {exc}"),
+                lambda sample: self._hand_over(name, sample, waited_s, put),
+                lambda exc: put(TakenUnreadable(name, UNDECODABLE, f"{type(exc).__name__}: {exc}")),
                 self._dds_error,
             )
         except Exception as exc:  # the C take failed (the reader is being deleted, ...)
             self._failed(name, "taking samples from DDS", exc)
 
-    def _hand_over(self, name: str, sample: Any, waited_s: float | None) -> None:
-        """A sample with data to ``on_message``, with its age when it waited in the
-        reader (Cyclone gives no reception time: the writer's stamp, bounded by the
-        wait, ``age_at_take``); one without (a writer that went away disposed or
+    def _hand_over(
+        self, name: str, sample: Any, waited_s: float | None, put: Callable[[Take], None]
+    ) -> None:
+        """A sample with data to ``put``, with its age when it waited in the reader
+        (Cyclone gives no reception time: the writer's stamp, bounded by the wait,
+        ``age_at_take``); one without (a writer that went away disposed or
         unregistered its instance) is only counted: it is no message, and a topic goes
         stale by its age, not by its publisher leaving."""
         if isinstance(sample, self._invalid_sample):
@@ -268,7 +282,15 @@ class DdsReaders:
         if waited_s is not None:
             written_ns = int(getattr(sample.sample_info, "source_timestamp", 0) or 0)
             age_s = age_at_take(written_ns, time.time_ns(), waited_s)
-        self._on_message(name, sample, age_s)
+        put(TakenMessage(name, sample, age_s))
+
+    def _deliver(self, take: Take) -> None:
+        """A sample taken outside the tick (by a listener, from a replaced reader),
+        handed over at once: to ``on_message``, or ``on_unreadable``."""
+        if isinstance(take, TakenMessage):
+            self._on_message(take.topic, take.message, take.age_s)
+        else:
+            self._on_unreadable(take.topic, take.reason, take.detail)
 
     def _failed(self, name: str, what: str, exc: Exception) -> None:
         """Log a failure at WARNING, at most once a minute per topic and kind."""

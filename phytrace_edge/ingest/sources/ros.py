@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import importlib
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from types import ModuleType
 from typing import Any
 
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
 from phytrace_edge.ingest.sources.ros_graph import (
@@ -162,9 +163,9 @@ class RosSource:
     def field_types(self, msg: Any) -> Mapping[str, str]:
         return rosidl_field_types(msg)
 
-    def before_tick(self) -> None:
-        if self.subscriber is not None:
-            self.subscriber.take_latest()
+    def before_tick(self) -> Sequence[Take]:
+        """The newest message of each state stream, taken (not called back)."""
+        return self.subscriber.take_latest() if self.subscriber is not None else []
 
     def stop(self) -> None:
         if self.node is not None:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
+from phytrace_edge.ingest.dispatch import TakenMessage
 from phytrace_edge.ingest.qos import QosChoice, before_publishers, incompatible, matching_qos
 from phytrace_edge.ingest.sources.base import OnMessage, age_at_take
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME
@@ -173,13 +174,13 @@ class TopicSubscriber:
     def refresh(self) -> None:
         with self._lock:  # the sampler's take_latest uses the same subscriptions
             kept = self._refresh()
-        for canonical, msg, age_s in kept:
-            self._on_message(canonical, msg, age_s)
+        for taken in kept:  # not at a tick: handed over as a callback hands its message
+            self._on_message(taken.topic, taken.message, taken.age_s)
 
-    def _refresh(self) -> list[tuple[str, Any, float]]:
+    def _refresh(self) -> list[TakenMessage]:
         """Subscribe and re-match; the messages (and their ages) taken from the
         subscriptions it replaced."""
-        kept: list[tuple[str, Any, float]] = []
+        kept: list[TakenMessage] = []
         for canonical, wanted in self._topics.items():
             publishers = [
                 info
@@ -223,7 +224,7 @@ class TopicSubscriber:
             if current is not None:
                 if self._is_taken(wanted):  # its newest message was not taken yet
                     waiting = self._take(canonical, current[0])
-                    kept += [(canonical, *waiting)] if waiting is not None else []
+                    kept += [TakenMessage(canonical, *waiting)] if waiting is not None else []
                 self._node.destroy_subscription(current[0])
             self._emptied_at[canonical] = self._steady_s()
             self.subscribed[canonical] = (
@@ -274,10 +275,10 @@ class TopicSubscriber:
             )
             self.qos_incompatible[canonical] = count
 
-    def take_latest(self) -> None:
-        """Hand over the newest message of each sampled topic, if one came since the
-        last tick (no executor runs their subscriptions); an extra topic's only when
-        it is due."""
+    def take_latest(self) -> list[TakenMessage]:
+        """The newest message of each sampled topic, if one came since the last tick
+        (no executor runs their subscriptions), with its age; an extra topic's only
+        when it is due. Returned, not handed over: the sampler dispatches them."""
         taken = []
         with self._lock:
             for canonical, wanted in self._topics.items():
@@ -288,9 +289,8 @@ class TopicSubscriber:
                     continue  # left in the subscription (keep last 1), not deserialised
                 waiting = self._take(canonical, current[0])
                 if waiting is not None:
-                    taken.append((canonical, *waiting))
-        for canonical, msg, age_s in taken:
-            self._on_message(canonical, msg, age_s)
+                    taken.append(TakenMessage(canonical, *waiting))
+        return taken
 
     def _take(self, canonical: str, subscription: Any) -> tuple[Any, float] | None:
         """The message waiting on a taken subscription and its age, or None."""

@@ -11,9 +11,10 @@ cycles take a fraction of a second.
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.sources.base import Feed, Finished, SourceOptions
 from phytrace_edge.ingest.sources.ros import RosSource
 from phytrace_edge.ingest.sources.ros_graph import NodeClock
@@ -62,8 +63,8 @@ class SimSource:
     def field_types(self, msg: Any) -> Mapping[str, str]:
         return self._ros.field_types(msg)
 
-    def before_tick(self) -> None:
-        self._ros.before_tick()
+    def before_tick(self) -> Sequence[Take]:
+        return self._ros.before_tick()
 
     def stop(self) -> None:
         self._ros.stop()
