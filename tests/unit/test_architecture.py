@@ -242,7 +242,7 @@ def test_only_the_queue_opens_sqlite_and_only_the_transport_and_stub_talk_http()
     sqlite = {m for m in importers_of("sqlite3") if component(m) != "queue"}
     assert sqlite == set(), sqlite
     http = {m for m in importers_of("httpx") if component(m) != "stub"}
-    assert http == {"phytrace_edge.ship.transport"}
+    assert http == {"phytrace_edge.ship.transport", "phytrace_edge.ship.bounded_http"}
 
 
 def test_no_stage_reads_the_configuration() -> None:

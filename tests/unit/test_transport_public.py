@@ -15,6 +15,7 @@ import ssl
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from types import ModuleType
 
 import httpcore
 import httpx
@@ -22,9 +23,10 @@ import pytest
 
 from phytrace_edge.errors import TransientSendError
 from phytrace_edge.redact import Secret
-from phytrace_edge.ship import tls, transport
+from phytrace_edge.ship import bounded_http, tls, transport
+from phytrace_edge.ship.bounded_http import BoundedTransport, Deadline
 from phytrace_edge.ship.tls import TlsOptions
-from phytrace_edge.ship.transport import BoundedTransport, Deadline, HttpTransport
+from phytrace_edge.ship.transport import HttpTransport
 from tests.network.proxy import ConnectProxy
 
 HIDDEN = "127.0.0.2"  # only the proxy routes here
@@ -56,8 +58,9 @@ def _timed(work: Callable[[], object]) -> tuple[float, BaseException | None]:
     return time.monotonic() - started, None
 
 
-def test_the_transport_names_nothing_private_of_httpx_or_httpcore() -> None:
-    tree = ast.parse(Path(transport.__file__).read_text())
+@pytest.mark.parametrize("module", [transport, bounded_http], ids=lambda m: m.__name__)
+def test_the_transport_names_nothing_private_of_httpx_or_httpcore(module: ModuleType) -> None:
+    tree = ast.parse(Path(module.__file__).read_text())
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
             assert not (node.module or "").startswith(("httpx._", "httpcore._")), node.module
@@ -185,9 +188,9 @@ def test_each_httpcore_error_becomes_httpx_s_of_the_same_name(name: str, in_body
     failure = getattr(httpcore, name)("what httpcore said")
     with pytest.raises(httpx.TransportError) as caught:
         if in_body:  # while the answer is read, as a trickle is cut off
-            list(transport._Body(_failing(failure)))
+            list(bounded_http._Body(_failing(failure)))
         else:
-            with transport._as_httpx_errors():
+            with bounded_http._as_httpx_errors():
                 raise failure
     assert type(caught.value) is getattr(httpx, name)
     assert str(caught.value) == "what httpcore said"
@@ -197,5 +200,5 @@ def test_each_httpcore_error_becomes_httpx_s_of_the_same_name(name: str, in_body
 def test_an_error_httpcore_does_not_raise_passes_as_it_is() -> None:
     failure = ValueError("not httpcore's")
     with pytest.raises(ValueError, match="not httpcore's") as caught:
-        list(transport._Body(_failing(failure)))
+        list(bounded_http._Body(_failing(failure)))
     assert caught.value is failure
