@@ -18,7 +18,7 @@ from typing import Any
 import orjson
 
 from phytrace_edge.errors import QueueError, QueueFullError
-from phytrace_edge.queue.encoding.codecs import Codecs, Encoded
+from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, Sealer
 from phytrace_edge.queue.records import PutResult
 from phytrace_edge.queue.space.caps import Caps, wal_reserve
@@ -28,8 +28,6 @@ from phytrace_edge.queue.storage.rows import NewRow, insert_rows
 from phytrace_edge.queue.timekeeping.repair import ClockKeeper
 
 log = logging.getLogger(__name__)
-
-Row = tuple[str, bool, int, Encoded]  # event_id, important, JSON size, encoded body
 
 
 class Appender:
@@ -67,19 +65,20 @@ class Appender:
         runs once they are counted, under the queue's lock (``locked``). Without
         ``upkeep`` (a stop), what has waited is not sealed into frames now."""
         classes = important if important is not None else [False] * len(events)
-        encoded = [self._encode(event, cls) for event, cls in zip(events, classes, strict=True)]
+        now = self._clock()  # when these were queued (queue time)
+        encoded = [self._encode(e, cls, now) for e, cls in zip(events, classes, strict=True)]
         rows = [row for row in encoded if row is not None]
         unencodable = len(encoded) - len(rows)  # counted with the rows, once they commit
         if not encoded:
             return PutResult(0, 0)
         try:
-            return self._insert(rows, unencodable, after_commit, upkeep)
+            return self._insert(rows, unencodable, after_commit, upkeep, now)
         except QueueFullError:
             if self._caps.limits.makes_room and self._full_disk.evict_oldest(
                 max(len(rows), self._db.counter("depth") // 100), self._clock()
             ):
                 with contextlib.suppress(QueueFullError):
-                    return self._insert(rows, unencodable, after_commit, upkeep)
+                    return self._insert(rows, unencodable, after_commit, upkeep, self._clock())
             with self._db.lock:
                 self._full_disk.refused(self._db.path, len(rows))
                 if unencodable:
@@ -88,9 +87,9 @@ class Appender:
                     after_commit()
             return PutResult(0, len(encoded))
 
-    def _encode(self, event: dict[str, Any], important: bool) -> Row | None:
-        """The row of one event; None (logged) for an event JSON cannot hold, so that
-        one bad event never costs its group."""
+    def _encode(self, event: dict[str, Any], important: bool, now: float) -> NewRow | None:
+        """The row of one event, queued at ``now``; None (logged) for an event JSON
+        cannot hold, so that one bad event never costs its group."""
         try:
             raw = orjson.dumps(event)
         except orjson.JSONEncodeError as exc:
@@ -101,7 +100,16 @@ class Appender:
                 exc,
             )
             return None
-        return str(event.get("event_id", "")), important, len(raw), self._codecs.encode(raw)
+        at_rest = self._codecs.encode(raw)
+        return NewRow(
+            event_id=str(event.get("event_id", "")),
+            important=int(important),
+            queued_at=now,
+            codec=at_rest.codec,
+            dict_id=at_rest.dict_id,
+            json_size=len(raw),
+            body=at_rest.body,
+        )
 
     def count_unqueued(self, reason: str, count: int) -> None:
         """Count ``count`` events that were built but never reached the queue (the
@@ -113,23 +121,20 @@ class Appender:
 
     def _insert(
         self,
-        rows: list[Row],
+        rows: list[NewRow],
         unencodable: int,
         after_commit: Callable[[], None] | None,
         upkeep: bool,
+        now: float,
     ) -> PutResult:
-        now = self._clock()
-        sizes = [len(encoded.body) for *_, encoded in rows]
+        sizes = [len(row.body) for row in rows]
         if rows and self._full_disk.refuses(sizes):
             raise QueueFullError(f"queue {self._db.path}: disk full")
         with self._db.transaction(after_commit=after_commit) as cursor:
             accepted = self._caps.make_room(cursor, rows, sizes, now) if rows else []
             insert_rows(
                 cursor,
-                [
-                    NewRow(eid, int(important), now, e.codec, e.dict_id, size, e.body)
-                    for eid, important, size, e in accepted
-                ],
+                accepted,
                 queued_total=len(rows),  # every event put, whatever the caps did with it
             )
             if self._clocks:  # stamped before a step already recorded (queue/timekeeping/repair.py)
