@@ -73,13 +73,6 @@ def image() -> str:
     return build_image("Dockerfile", "phytrace-edge")
 
 
-@pytest.fixture(scope="session")
-def ros_apt_image() -> str:
-    """Dockerfile.ros on the stand-in base, without its ROS packages (no ROS apt
-    repository here)."""
-    return build_image("Dockerfile.ros", "phytrace-edge-ros", "ROS_PACKAGES=")
-
-
 class Docker:
     """Containers and volumes of one test, all removed at its end."""
 

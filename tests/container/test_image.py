@@ -131,22 +131,3 @@ def test_a_killed_containers_backlog_goes_with_the_next_one_without_a_lease_wait
     assert time.monotonic() - second_started < 45
     old = [e for e in stub.events() if seconds(e["captured_at"]) <= killed_at]
     assert len(old) == queued and stub.stats()["duplicates"] == 0
-
-
-def test_the_ros_apt_image_runs_the_bridge(ros_apt_image: str, stub) -> None:
-    """Dockerfile.ros (for arm64 robots: ros:jazzy-ros-base) on the stand-in base: the
-    same user, volume and health check, its sim bridge delivering."""
-    made = Docker(ros_apt_image)
-    try:
-        bridge = made.run(
-            "apt",
-            "-v",
-            f"{made.volume('queue')}:/var/lib/phytrace-edge",
-            *FAST_HEALTH,
-            env=bridge_env(stub.endpoint, SOURCE_ID="ros-apt-image"),
-        )
-        made.wait_health(bridge, "healthy")
-        assert made.exec(bridge, "id", "-u") == "10001"
-        wait_for(lambda: stub.stats()["by_source"].get("ros-apt-image", 0) > 5, 60, "its events")
-    finally:
-        made.cleanup()
