@@ -105,7 +105,8 @@ def test_a_message_published_before_the_next_graph_check_is_not_lost(graph) -> N
     Diagnostics are listened to as their publishers offer them, reliable and volatile,
     so the graph check finds nothing to change."""
     g = graph()
-    first, choice, _ = g.subscription("/diagnostics")
+    first = g.subscription("/diagnostics").handle
+    choice = g.subscription("/diagnostics").qos
     assert (choice.reliable, choice.transient_local) == (True, False)
     g.run(0.5)
     publisher = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
@@ -117,14 +118,14 @@ def test_a_message_published_before_the_next_graph_check_is_not_lost(graph) -> N
     errors = [e for ev in g.events for e in ev.get("operational", {}).get("errors", [])]
     assert [(e["name"], e["level"]) for e in errors][:1] == [("motor", "error")]
     g.run(GRAPH_CHECK_S)
-    assert g.subscription("/diagnostics")[0] is first  # matched already: not re-created
+    assert g.subscription("/diagnostics").handle is first  # matched already: not re-created
 
 
 def test_state_streams_listen_best_effort_before_a_publisher_is_seen(graph) -> None:
     """A sensor's driver publishes best effort: before the bridge has seen one, it
     listens best effort, which matches any publisher."""
     g = graph()
-    _, choice, _ = g.subscription("/scan")
+    choice = g.subscription("/scan").qos
     assert (choice.reliable, choice.transient_local) == (False, False)
     scan = g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT)
     g.run(0.5)
@@ -137,7 +138,7 @@ def test_a_best_effort_sensor_is_heard(graph) -> None:
     g = graph()
     g.robot.create_publisher(m.LaserScan, "/scan", BEST_EFFORT).publish(m.LaserScan())
     g.run(GRAPH_CHECK_S + 0.1)
-    _, choice, _ = g.subscription("/scan")
+    choice = g.subscription("/scan").qos
     assert (choice.reliable, choice.transient_local) == (False, False)
 
 
@@ -145,11 +146,13 @@ def test_a_new_incompatible_publisher_gets_the_subscription_recreated(graph) -> 
     g = graph()
     reliable = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
     g.run(GRAPH_CHECK_S + 0.1)
-    first, choice, _ = g.subscription("/diagnostics")
+    first = g.subscription("/diagnostics").handle
+    choice = g.subscription("/diagnostics").qos
     assert choice.reliable
     best_effort = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", BEST_EFFORT)
     g.run(GRAPH_CHECK_S + 0.1)
-    second, choice, _ = g.subscription("/diagnostics")
+    second = g.subscription("/diagnostics").handle
+    choice = g.subscription("/diagnostics").qos
     assert second is not first and not choice.reliable
     reliable.publish(m.DiagnosticArray())
     best_effort.publish(m.DiagnosticArray())
@@ -164,7 +167,7 @@ def test_a_latched_goal_published_before_the_bridge_is_received(graph) -> None:
     goal.pose.position = m.Point(x=45.0, y=22.0, z=0.0)
     publisher.publish(goal)
     g.run(GRAPH_CHECK_S + 0.5)
-    _, choice, _ = g.subscription("/goal_pose")
+    choice = g.subscription("/goal_pose").qos
     assert choice.transient_local and choice.reliable
     assert g.events[-1]["navigation"]["goal"]["x_m"] == 45.0
 
@@ -206,7 +209,7 @@ def test_a_publisher_of_another_type_is_ignored(graph) -> None:
     g.run(GRAPH_CHECK_S + 0.1)
     publisher.publish(m.String(data="x"))
     g.run(0.3)
-    assert g.subscription("/odom")[2] == "nav_msgs/msg/Odometry"  # its own type, still
+    assert g.subscription("/odom").type_name == "nav_msgs/msg/Odometry"  # its own type, still
     assert g.received("/odom") == 0
 
 
@@ -257,7 +260,7 @@ def test_extra_topics_take_their_type_from_the_graph(graph) -> None:
     g.robot.create_publisher(vendor, "/robot1/acme/drive", RELIABLE)
     del MESSAGE_TYPES["acme_msgs/msg/DriveStatus"]  # in the graph, not installed here
     g.run(GRAPH_CHECK_S + 0.1)
-    assert g.subscription("/motor/temperature")[2] == "sensor_msgs/msg/Temperature"
+    assert g.subscription("/motor/temperature").type_name == "sensor_msgs/msg/Temperature"
     assert g.subscription("/acme/drive") is None
     stats = g.subscriber.stats()
     assert stats["/acme/drive"]["type_unknown"] == "acme_msgs/msg/DriveStatus"
@@ -313,16 +316,16 @@ def test_a_state_stream_re_matched_at_the_graph_check_keeps_its_waiting_message(
     since the last tick, still waiting in the old subscription, is handed over, not
     destroyed with it."""
     g = graph(SAMPLE_RATE_HZ="5")
-    first, choice, _ = g.subscription("/battery_state")
-    assert not choice.reliable
+    first = g.subscription("/battery_state")
+    assert not first.qos.reliable
     battery = g.robot.create_publisher(m.BatteryState, "/battery_state", RELIABLE)
     g.run(1.0)
     battery.publish(m.BatteryState(voltage=20.0, percentage=0.5))
     g.run(0.95)  # past the tick at 1.8 s, before the check and the tick at 2.0 s
     battery.publish(m.BatteryState(voltage=21.0, percentage=0.5))
     g.run(0.1)
-    replaced, choice, _ = g.subscription("/battery_state")
-    assert replaced is not first and choice.reliable
+    replaced = g.subscription("/battery_state")
+    assert replaced.handle is not first.handle and replaced.qos.reliable
     assert g.events[-1]["power"]["battery"]["voltage_v"] == 21.0
 
 

@@ -126,6 +126,15 @@ def wanted_topics(
     return wanted
 
 
+@dataclass(frozen=True)
+class Subscription:
+    """A topic's rclpy subscription, with the QoS and type it was made for."""
+
+    handle: Any  # rclpy's Subscription
+    qos: QosChoice
+    type_name: str
+
+
 class TopicSubscriber:
     """One subscription per enabled topic, matched to what its publishers offer.
 
@@ -166,7 +175,7 @@ class TopicSubscriber:
         self._system, self._steady = api.clock("system"), api.clock("steady")
         # steady seconds when each taken subscription was last emptied (or made)
         self._emptied_at: dict[str, float] = {}
-        self.subscribed: dict[str, tuple[Any, QosChoice, str]] = {}
+        self.subscribed: dict[str, Subscription] = {}
         self.publishers: dict[str, int] = dict.fromkeys(topics, 0)
         self.qos_incompatible: Counter[str] = Counter()
         self.type_unknown: dict[str, str] = {}
@@ -211,7 +220,7 @@ class TopicSubscriber:
                 type_name = wanted.types[0]
             else:
                 continue
-            if current is not None and current[1:] == (choice, type_name):
+            if current is not None and (current.qos, current.type_name) == (choice, type_name):
                 continue
             try:
                 message_class = self._api.message_type(type_name)
@@ -223,14 +232,12 @@ class TopicSubscriber:
                 continue
             if current is not None:
                 if self._is_taken(wanted):  # its newest message was not taken yet
-                    waiting = self._take(canonical, current[0])
+                    waiting = self._take(canonical, current.handle)
                     kept += [TakenMessage(canonical, *waiting)] if waiting is not None else []
-                self._node.destroy_subscription(current[0])
+                self._node.destroy_subscription(current.handle)
             self._emptied_at[canonical] = self._steady_s()
-            self.subscribed[canonical] = (
-                self._subscribe(canonical, wanted, message_class, choice),
-                choice,
-                type_name,
+            self.subscribed[canonical] = Subscription(
+                self._subscribe(canonical, wanted, message_class, choice), choice, type_name
             )
             log.info(
                 "%s: subscribed to %s (%s) as %s",
@@ -247,7 +254,7 @@ class TopicSubscriber:
         return {
             canonical: {
                 "publishers": self.publishers.get(canonical, 0),
-                "qos": self.subscribed[canonical][1].describe()
+                "qos": self.subscribed[canonical].qos.describe()
                 if canonical in self.subscribed
                 else None,
                 "qos_incompatible": self.qos_incompatible.get(canonical, 0),
@@ -287,7 +294,7 @@ class TopicSubscriber:
                     continue
                 if wanted.extra and not self._due(canonical):
                     continue  # left in the subscription (keep last 1), not deserialised
-                waiting = self._take(canonical, current[0])
+                waiting = self._take(canonical, current.handle)
                 if waiting is not None:
                     taken.append(TakenMessage(canonical, *waiting))
         return taken
