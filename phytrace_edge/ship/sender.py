@@ -38,6 +38,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import NamedTuple
 
 from tenacity import RetryCallState, Retrying, retry_if_exception_type
 
@@ -61,6 +62,13 @@ BEAT_S = 1.0
 # JSON claimed per byte of BATCH_MAX_BYTES when compressing: telemetry compresses 8-15x,
 # so a batch claimed at 4x still fits; one that does not is halved before it is sent
 JSON_PER_WIRE_BYTE = 4
+
+
+class Due(NamedTuple):
+    """Whether a batch should go now, and how many events wait."""
+
+    now: bool
+    depth: int
 
 
 class Restamped(Exception):
@@ -194,20 +202,21 @@ class Sender:
 
     # ------------------------------------------------------------------ one batch
 
-    def due(self) -> tuple[bool, int]:
-        """(Whether a batch should go now, the events waiting): a full batch waits,
-        or the oldest event has waited FLUSH_INTERVAL_S."""
+    def due(self) -> Due:
+        """Whether a batch should go now (a full batch waits, or the oldest event has
+        waited FLUSH_INTERVAL_S), and the events waiting."""
         depth, oldest = self.store.backlog()
         if depth == 0 or oldest is None:
-            return False, depth
+            return Due(now=False, depth=depth)
         waited = self._clock() - oldest >= self.policy.flush_interval_s
-        return depth >= self.policy.batch_size or waited, depth
+        return Due(now=depth >= self.policy.batch_size or waited, depth=depth)
 
     def prepare_next(self, flush: bool = False) -> Prepared | None:
         """Claim the next batch and encode it; None when no batch is due."""
-        due, depth = self.due()
-        if not flush and not due:
+        due = self.due()
+        if not flush and not due.now:
             return None
+        depth = due.depth
         policy = self.policy
         # a backlog goes in big requests, but not while requests fail: a probe of a live
         # batch finds out whether the link is back without holding a megabyte

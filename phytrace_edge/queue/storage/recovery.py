@@ -25,6 +25,7 @@ import sqlite3
 import stat
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 from phytrace_edge.errors import QueueBusyError, QueueError
 from phytrace_edge.queue.peek import DAMAGED_SUFFIX
@@ -52,9 +53,16 @@ def connect(path: Path, busy_timeout_s: float) -> sqlite3.Connection:
     return connection
 
 
-def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection, Path | None, bool]:
-    """Open the queue at ``path`` in WAL mode; (connection, where a bad file was moved,
-    whether the whole file was checked)."""
+class Opened(NamedTuple):
+    """The queue file, opened and checked."""
+
+    connection: sqlite3.Connection
+    quarantined: Path | None  # where a damaged file was moved aside, if one was
+    checked_whole: bool  # False: the check ran out of time (the file is large)
+
+
+def open_checked(path: Path, busy_timeout_s: float) -> Opened:
+    """Open the queue at ``path`` in WAL mode, after checking it."""
     exists = _check_place(path)
     quarantined, whole = None, True
     if exists and path.stat().st_size > 0:
@@ -77,7 +85,7 @@ def open_checked(path: Path, busy_timeout_s: float) -> tuple[sqlite3.Connection,
         raise QueueError(
             f"queue {path}: cannot use WAL mode (got {mode}) - is it on a network share?"
         )
-    return connection, quarantined, whole
+    return Opened(connection, quarantined, whole)
 
 
 def damage_marker(path: Path) -> Path:
