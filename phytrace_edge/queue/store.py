@@ -21,6 +21,7 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -59,32 +60,37 @@ log = logging.getLogger(__name__)
 INTEGRITY_EVERY_S = 24 * 3600.0
 
 
+@dataclass(frozen=True)
+class StoreSetup:
+    """How a store is set up, as ``QueueStore.open`` was asked (see there)."""
+
+    limits: QueueLimits
+    compression: str
+    clock: Callable[[], float] | None
+    clocks: SystemClocks | None
+    lease_s: float
+    frame_events: int
+
+
 class QueueStore:
     """The queue database; open it with ``QueueStore.open``."""
 
-    def __init__(
-        self,
-        db: Database,
-        *,
-        limits: QueueLimits,
-        compression: str = DEFAULT_COMPRESSION,
-        clock: Callable[[], float] | None = None,
-        clocks: SystemClocks | None = None,
-        lease_s: float = DEFAULT_LEASE_S,
-        frame_events: int = FRAME_EVENTS,
-    ) -> None:
+    def __init__(self, db: Database, setup: StoreSetup) -> None:
+        limits, clock, frame_events = setup.limits, setup.clock, setup.frame_events
         self._db = db
         self.path = db.path
         self.limits = limits
-        self.lease_s = lease_s
+        self.lease_s = setup.lease_s
         self._owner = Owner(db.path)
-        self.codecs = Codecs(compression)
+        self.codecs = Codecs(setup.compression)
         # queue time (queue/timekeeping/clock.py) and repairs after a step, unless a
         # test brings a clock
         self._clocks = (
             None
             if clock
-            else ClockKeeper(db, clocks or SystemClocks(), self.codecs, self._owner.token, lease_s)
+            else ClockKeeper(
+                db, setup.clocks or SystemClocks(), self.codecs, self._owner.token, setup.lease_s
+            )
         )
         self._clock = clock or self._clocks.queue_time.now  # type: ignore[union-attr]
         self._claims = itertools.count(1)
@@ -124,19 +130,24 @@ class QueueStore:
         queue time (``queue/timekeeping/clock.py``) read from ``clocks``; tests of ages pass a
         ``clock`` of their own instead, and a small ``frame_events`` to see frames form.
         """
-        options = {"limits": limits or QueueLimits(), "compression": compression}
-        options |= {"clock": clock, "clocks": clocks}
-        options |= {"lease_s": lease_s, "frame_events": frame_events}
+        setup = StoreSetup(
+            limits=limits or QueueLimits(),
+            compression=compression,
+            clock=clock,
+            clocks=clocks,
+            lease_s=lease_s,
+            frame_events=frame_events,
+        )
         try:
-            return cls._open_once(Path(path), sync, busy_timeout_s, options)
+            return cls._open_once(Path(path), sync, busy_timeout_s, setup)
         except QueueDamagedError:
             # damage the bounded check at open did not reach: now marked, so this
             # open checks the file whole and moves it aside
-            return cls._open_once(Path(path), sync, busy_timeout_s, options)
+            return cls._open_once(Path(path), sync, busy_timeout_s, setup)
 
     @classmethod
     def _open_once(
-        cls, path: Path, sync: str, busy_timeout_s: float, options: dict[str, Any]
+        cls, path: Path, sync: str, busy_timeout_s: float, setup: StoreSetup
     ) -> QueueStore:
         connection, quarantined, checked_whole = open_checked(path, busy_timeout_s)
         try:
@@ -148,9 +159,9 @@ class QueueStore:
             if isinstance(error, QueueDamagedError):
                 mark_damaged(path, str(exc))
             raise error from exc
-        reserve = SpaceReserve.sized_for(path, wal_reserve(options["limits"].max_bytes))
+        reserve = SpaceReserve.sized_for(path, wal_reserve(setup.limits.max_bytes))
         try:
-            store = cls(Database(connection, path, reserve), **options)
+            store = cls(Database(connection, path, reserve), setup)
         except QueueError:
             connection.close()
             raise
@@ -162,7 +173,7 @@ class QueueStore:
         store.take_back_orphaned_leases()
         sweep_dead_owners(path)
         reserve.restore()
-        warn_if_volume_smaller_than(path, store.file_bytes(), options["limits"].max_bytes)
+        warn_if_volume_smaller_than(path, store.file_bytes(), setup.limits.max_bytes)
         return store
 
     def close(self) -> None:
