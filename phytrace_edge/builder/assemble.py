@@ -22,7 +22,8 @@ from typing import Any, cast
 from phytrace_edge.builder.envelope import classify_stamp, envelope
 from phytrace_edge.ingest.convert import MM, compass_heading_deg, present, rounded
 from phytrace_edge.ingest.readings import Reading, Readings
-from phytrace_edge.ingest.topics import DOMAINS, TOPIC_BY_NAME, TOPICS, Domain
+from phytrace_edge.ingest.topics import DOMAINS as DOMAINS  # an event's domains, re-exported
+from phytrace_edge.ingest.topics import TOPIC_BY_NAME, TOPICS, Domain
 
 EVENT_TYPE_PERIODIC = "telemetry.periodic"
 # The topics that feed each domain, in table order: the domain's ``sources``.

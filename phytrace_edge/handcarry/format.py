@@ -173,14 +173,14 @@ class ExportWriter:
 
     def flush_block(self) -> None:
         """End the chunk in progress, so ``compressed_bytes`` is exact."""
-        self._mcap.flush()
+        self._mcap.flush()  # type: ignore[no-untyped-call]  # mcap's Writer is untyped
         self._chunks += 1
 
     def finish(self) -> Manifest:
-        self._mcap.flush()
+        self._mcap.flush()  # type: ignore[no-untyped-call]
         self.manifest.sha256 = self._digest.hexdigest()
         self._mcap.add_metadata(MANIFEST_RECORD, self.manifest.as_metadata())
-        self._mcap.finish()
+        self._mcap.finish()  # type: ignore[no-untyped-call]
         self._raw.flush()
         os.fsync(self._raw.fileno())
         self._raw.close()

@@ -61,13 +61,12 @@ def rounded(value: Any, steps: float) -> float | None:
     """A finite number rounded to 1/``steps`` (``MM`` = 1000: to the millimetre), else
     None. ``round(x * steps) / steps`` is the double nearest the rounded decimal, so it
     prints as that decimal, and costs a quarter of ``round(x, 3)``."""
-    if type(value) is not float:
-        value = finite(value)
-        if value is None:
-            return None
-    scaled = value * steps
+    number: float | None = value if type(value) is float else finite(value)
+    if number is None:
+        return None
+    scaled = number * steps
     if scaled - scaled != 0.0:  # NaN or inf, or a finite value too large to scale
-        return value if math.isfinite(value) else None
+        return number if math.isfinite(number) else None
     return round(scaled) / steps
 
 
@@ -125,7 +124,7 @@ def integer(value: Any) -> int | None:
     or a one-byte ``bytes`` as rclpy gives for the ROS ``byte`` type."""
     kind = type(value)
     if kind is int:
-        return value
+        return int(value)
     if kind is bytes or kind is bytearray:
         return value[0] if len(value) == 1 else None
     if kind is bool or not isinstance(value, numbers.Integral):

@@ -176,7 +176,7 @@ def _rosidl(node: tuple[Any, Any]) -> str:
     """A rosbags field node (nodetype, description) as a rosidl type string."""
     nodetype, description = int(node[0]), node[1]
     if nodetype == 1:  # BASE: (name, string bound)
-        return _ROSIDL_BASE.get(description[0], description[0])
+        return str(_ROSIDL_BASE.get(description[0], description[0]))
     if nodetype == 2:  # NAME: pkg/msg/Type
         package, _, name = description.rpartition("/msg/")
         return f"{package}/{name}"

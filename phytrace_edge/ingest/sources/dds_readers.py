@@ -151,7 +151,7 @@ class DdsReaders:
             def deliver(reader: Any, name: str = read.name) -> None:
                 self._take(name, reader, READER_DEPTH, self._deliver)
 
-            listener = Listener(on_data_available=deliver)
+            listener = Listener(on_data_available=deliver)  # type: ignore[no-untyped-call]
         read.reader = DataReader(self.participant, read.topic, qos=qos, listener=listener)
         read.choice, read.emptied_at = choice, time.monotonic()
 

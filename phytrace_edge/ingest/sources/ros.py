@@ -40,7 +40,8 @@ def load_rclpy(import_module: Callable[[str], ModuleType] = importlib.import_mod
 
     def message_type(type_name: str) -> type:
         package, _, name = type_name.split("/")
-        return getattr(import_module(f"{package}.msg"), name)
+        message_class: type = getattr(import_module(f"{package}.msg"), name)
+        return message_class
 
     def make_clock(kind: str) -> Any:
         clock_type = (

@@ -55,7 +55,7 @@ def taken_at_the_tick(api: RosApi) -> Any:
     one node, spun for its timers and its parameter services (a second node that
     nobody spins would leave ``ros2 param list`` waiting forever)."""
 
-    class TakenAtTheTick(api.callback_group_base):  # type: ignore[name-defined]
+    class TakenAtTheTick(api.callback_group_base):  # type: ignore[name-defined,misc]
         def can_execute(self, entity: Any) -> bool:
             return False
 
