@@ -26,10 +26,9 @@ from pathlib import Path
 
 import pytest
 
-from phytrace_edge.builder.assemble import DOMAINS
 from tests.container.conftest import Docker, docker
 from tests.processes import wait_for
-from tests.ros.known import KNOWN, check_known_event
+from tests.ros.known import KNOWN, carries_every_known_value, check_known_event
 from tests.ros.rig import ROS_PYTHONS, Robot, private_domain, rclpy_missing, ros_env
 
 pytestmark = pytest.mark.timeout(900)  # the first test of the session builds the image
@@ -37,11 +36,6 @@ pytestmark = pytest.mark.timeout(900)  # the first test of the session builds th
 IMAGE_UID = 10001
 FAST_HEALTH = ("--health-interval", "2s", "--health-start-period", "2s", "--health-retries", "2")
 SHARED_MEMORY = ("--ipc", "host")  # with the robot's nodes: Fast DDS to Fast DDS
-
-
-def has_every_topic(event: dict) -> bool:
-    """Every domain, and the diagnostics ERROR (reported while /diagnostics is fresh)."""
-    return set(DOMAINS) <= set(event) and bool(event["operational"].get("errors"))
 
 
 @pytest.fixture
@@ -109,7 +103,7 @@ def test_the_image_hears_a_real_robot_outside(
             for topic, (_, _, fields) in KNOWN.items():  # a robot publishes again and again
                 robot.publish(publishers[topic], fields)
             events = [e for e in stub.events() if e["event_type"] == "telemetry.periodic"]
-            return next((e for e in reversed(events) if has_every_topic(e)), None)
+            return next((e for e in reversed(events) if carries_every_known_value(e)), None)
 
         try:
             event = wait_for(every_value_arrived, 90, "an event with every topic's values", 0.3)

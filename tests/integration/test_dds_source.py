@@ -17,7 +17,6 @@ pytest.importorskip("cyclonedds", reason="the DDS input needs cyclonedds (pip in
 
 from cyclonedds.idl import IdlStruct
 
-from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.config import load_settings
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.sources import dds_types
@@ -26,7 +25,7 @@ from phytrace_edge.ingest.sources.dds_env import domain_settings
 from phytrace_edge.runtime import options, wiring
 from phytrace_edge.udm.schema import find_violation
 from tests.processes import python_env, wait_for
-from tests.ros.known import KNOWN, check_known_event
+from tests.ros.known import KNOWN, carries_every_known_value, check_known_event
 from tests.ros.rig import Robot, private_domain, rclpy_missing, ros_env
 from tests.unit.test_generic import KNOWN as KNOWN_EXTRA
 
@@ -134,9 +133,9 @@ class DdsInput:
     def event_with_every_domain(self, during: Callable[[], None] = lambda: None) -> dict:
         def found() -> dict | None:
             during()
-            return next((e for e in reversed(self.events) if set(DOMAINS) <= set(e)), None)
+            return next((e for e in reversed(self.events) if carries_every_known_value(e)), None)
 
-        return wait_for(found, 60, "an event with every domain", every=0.2)
+        return wait_for(found, 60, "an event with every known value", every=0.2)
 
     def close(self) -> None:
         self._stop.set()

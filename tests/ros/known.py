@@ -14,6 +14,8 @@ from typing import Any
 
 import pytest
 
+from phytrace_edge.builder.assemble import DOMAINS
+
 STAMP = {"sec": 1_763_000_000, "nanosec": 500_000_000}
 STAMP_TEXT = "2025-11-13T02:13:20.500Z"
 
@@ -136,6 +138,14 @@ KNOWN: dict[str, tuple[str, str, dict[str, Any]]] = {
         {"data": json.dumps(DELIVERY)},
     ),
 }  # fmt: skip
+
+
+def carries_every_known_value(event: dict[str, Any]) -> bool:
+    """Whether ``check_known_event`` can be asked of ``event``: every domain, and the
+    diagnostics ERROR. An event can have every domain before the first diagnostics
+    message arrived (``operational`` from /delivery/status alone), so a domain count
+    is not enough to wait on."""
+    return set(DOMAINS) <= set(event) and bool(event["operational"].get("errors"))
 
 
 def check_known_event(event: dict[str, Any]) -> None:

@@ -17,9 +17,8 @@ from typing import Any
 
 import pytest
 
-from phytrace_edge.builder.assemble import DOMAINS
 from tests.processes import wait_for
-from tests.ros.known import KNOWN, check_known_event
+from tests.ros.known import KNOWN, carries_every_known_value, check_known_event
 from tests.ros.rig import Rig
 
 ERROR = {"level": 2, "name": "motor", "message": "overcurrent", "hardware_id": "mc"}
@@ -30,10 +29,6 @@ def publish_known(rig: Rig, topics: dict[str, tuple[str, str, dict]]) -> dict[st
     for topic, (_, _, fields) in topics.items():
         rig.publish(publishers[topic], fields)
     return publishers
-
-
-def has_every_domain(event: dict) -> bool:
-    return set(DOMAINS) <= set(event)
 
 
 def test_all_ten_topics_with_known_values(rig: Rig) -> None:
@@ -50,7 +45,7 @@ def test_all_ten_topics_with_known_values(rig: Rig) -> None:
         # publishers keep publishing, as a robot does, until every domain is in one event
         for topic, (_, _, fields) in others.items():
             rig.publish(publishers[topic], fields)
-        return next((e for e in reversed(rig.events()) if has_every_domain(e)), None)
+        return next((e for e in reversed(rig.events()) if carries_every_known_value(e)), None)
 
     event = wait_for(republish_and_look, 60, "an event with every domain", every=0.3)
     check_known_event(event)
