@@ -262,7 +262,8 @@ def test_a_client_certificate_from_another_ca_is_named_as_refused(
     with pytest.raises(EndpointRefusedError) as refused:
         post(gateway.endpoint, TlsOptions(str(ca.pem), client))
     assert "refused this robot's client certificate" in str(refused.value)
-    assert len(gateway.refused) == 1
+    # the gateway notes the refusal after its alert reached the client: wait for it
+    wait_for(lambda: len(gateway.refused) == 1, 10, "the gateway to note one refusal")
 
 
 def test_a_server_that_hangs_up_without_an_alert_gets_a_client_certificate_hint(
