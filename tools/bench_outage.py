@@ -57,10 +57,10 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.redact import Secret
 from phytrace_edge.ship.defaults import DEFAULT_BACKLOG_BATCH_SIZE
 from phytrace_edge.ship.options import SendPolicy
-from phytrace_edge.ship.request import BodyEncoder, events_body, request_headers
 from phytrace_edge.ship.sender import Sender
-from phytrace_edge.ship.transport import HttpTransport
+from phytrace_edge.ship.transport import BodyEncoder, HttpTransport, events_body, request_headers
 from phytrace_edge.udm.event import new_event_id
+from phytrace_edge.udm.types import Built
 from phytrace_edge.units import GIB, MIB
 from tests.processes import StubProcess, free_port, python_env, wait_for
 
@@ -116,7 +116,7 @@ def fill(
     with tqdm(total=count, unit="ev", desc=f"fill {path.name}", leave=False) as bar:
         for at, second in outage(base, count, clock[0]):
             clock[0] = at
-            store.put_many(second)
+            store.put_many([Built(event) for event in second])
             bar.update(len(second))
     elapsed = time.perf_counter() - started
     store.reclaim_space(force=True)

@@ -39,6 +39,7 @@ import orjson
 from phytrace_edge import run_simulation
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.udm.types import Built
 from phytrace_edge.units import GIB
 
 ROUNDS = 3
@@ -99,7 +100,7 @@ class Ours:
         if len(events) == 1:
             self.store.put(events[0])
         else:
-            self.store.put_many(events)
+            self.store.put_many([Built(event) for event in events])
 
     def drain(self, batch: int) -> int:
         claimed = self.store.claim_batch(batch, 64 * 1024 * 1024)

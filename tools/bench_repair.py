@@ -29,6 +29,7 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.queue.timekeeping.repair import pending_repair
 from phytrace_edge.udm.event import format_timestamp
+from phytrace_edge.udm.types import Built
 from phytrace_edge.units import GIB, MIB
 from tests.unit.queue_fixtures import NOW, Y2001, Machine
 
@@ -46,7 +47,7 @@ def fill(store: QueueStore, machine: Machine, count: int) -> None:
             stamp = {"captured_at": format_timestamp(machine.wall)}
             group.append({**samples[n % len(samples)], **stamp, "event_id": str(uuid.uuid4())})
             group[-1]["wall_clock"] = {"synchronized": False}
-        store.put_many(group)
+        store.put_many([Built(event) for event in group])
         if start % 10_000 == 0:
             store.record_clocks()  # the heartbeat's looks
 

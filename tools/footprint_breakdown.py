@@ -74,6 +74,7 @@ def queue_work(folder: Path) -> object:
     does, and claim and ack them as a sender does."""
     from phytrace_edge.builder.envelope import envelope
     from phytrace_edge.queue.store import QueueStore
+    from phytrace_edge.udm.types import Built
 
     identity = {"source_id": "amr-1", "source_type": "amr"}
     store = QueueStore.open(folder / "queue.db")
@@ -83,7 +84,7 @@ def queue_work(folder: Path) -> object:
             {**envelope(identity, "telemetry.periodic", 1_795_300_000 + i * 0.2), **padding}
             for i in range(start, start + 50)
         ]
-        store.put_many(batch)
+        store.put_many([Built(event) for event in batch])
     while (claimed := store.claim_batch(500, 4 * 1024 * 1024)) is not None:
         store.ack(claimed)
     return store
@@ -116,11 +117,11 @@ def thread_contexts(kept: list[object]) -> Callable[[], None]:
 
 
 def wire(kept: list[object]) -> Callable[[], None]:
-    """``ship.request.BodyEncoder`` for zstd, used on a 500-event body (gzip keeps no
+    """``ship.transport.BodyEncoder`` for zstd, used on a 500-event body (gzip keeps no
     context between requests)."""
 
     def make() -> None:
-        from phytrace_edge.ship.request import BodyEncoder
+        from phytrace_edge.ship.transport import BodyEncoder
 
         encoder = BodyEncoder("zstd")
         encoder.encode(b"[" + b",".join([b'{"pad": "%s"}' % (b"y" * 3400)] * 500) + b"]")

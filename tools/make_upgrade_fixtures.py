@@ -29,13 +29,17 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "tests" / "data" / "upgrade"
 
 # runs inside the release's tree: only its QueueStore.open and put_many, which every
-# release has had
+# release has had (from 0.3.0 it takes Built events, before them plain ones)
 QUEUE_EVENTS = """
 import json, sys
 from phytrace_edge.queue.store import QueueStore
+try:
+    from phytrace_edge.udm.types import Built
+except ImportError:
+    Built = None
 events = json.loads(sys.stdin.read())
 with QueueStore.open(sys.argv[1]) as store:
-    result = store.put_many(events)
+    result = store.put_many(events if Built is None else [Built(e) for e in events])
 assert result.accepted == len(events), result
 """
 

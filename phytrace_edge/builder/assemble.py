@@ -24,6 +24,7 @@ from phytrace_edge.ingest.convert import MM, compass_heading_deg, present, round
 from phytrace_edge.ingest.readings import Reading, Readings
 from phytrace_edge.ingest.topics import DOMAINS as DOMAINS  # an event's domains, re-exported
 from phytrace_edge.ingest.topics import TOPIC_BY_NAME, TOPICS, Domain
+from phytrace_edge.udm.types import PeriodicEvent, UdmIdentity
 
 EVENT_TYPE_PERIODIC = "telemetry.periodic"
 # The topics that feed each domain, in table order: the domain's ``sources``.
@@ -60,7 +61,7 @@ def is_fresh(topic: str, latest: Latest, now_mono_s: float, stale_after_s: float
 
 
 def assemble_event(
-    identity: dict[str, str],
+    identity: UdmIdentity,
     snapshot: Snapshot,
     *,
     event_id: str,
@@ -68,7 +69,7 @@ def assemble_event(
     now_mono_s: float,
     stale_after_s: float,
     use_sim_time: bool = False,
-) -> dict[str, Any]:
+) -> PeriodicEvent:
     """One ``telemetry.periodic`` event from ``snapshot`` (see the module doc)."""
     fresh = {
         topic: latest
@@ -88,7 +89,7 @@ def assemble_event(
             if topic in fresh
         ]
 
-    event = envelope(identity, EVENT_TYPE_PERIODIC, captured_at_s, event_id)
+    event: PeriodicEvent = {**envelope(identity, EVENT_TYPE_PERIODIC, captured_at_s, event_id)}
     for name, build in DOMAIN_BUILDERS.items():
         domain = build(readings, snapshot)
         if domain:

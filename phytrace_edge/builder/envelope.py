@@ -7,41 +7,39 @@ time since boot, or a stamp more than a day in the future) or ``none`` (a zero s
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 from phytrace_edge.udm.event import format_timestamp, new_event_id
 from phytrace_edge.udm.schema import SCHEMA_VERSION
+from phytrace_edge.udm.types import Envelope, Stamp, UdmIdentity
 
 EPOCH_2000_S = 946_684_800.0
 FUTURE_TOLERANCE_S = 86_400.0
 
 
 def envelope(
-    identity: Mapping[str, str],
+    identity: UdmIdentity,
     event_type: str,
     captured_at_s: float,
     event_id: str | None = None,
-) -> dict[str, Any]:
+) -> Envelope:
     """The fields every event has; a new time-ordered ``event_id`` unless given."""
-    return {
-        "event_id": event_id or new_event_id(int(captured_at_s * 1000)),
-        "event_type": event_type,
-        "schema_version": SCHEMA_VERSION,
-        "captured_at": format_timestamp(captured_at_s),
-        "source_id": identity["source_id"],
-        "source_type": identity["source_type"],
-        "identity": dict(identity),
-    }
+    return Envelope(
+        event_id=event_id or new_event_id(int(captured_at_s * 1000)),
+        event_type=event_type,
+        schema_version=SCHEMA_VERSION,
+        captured_at=format_timestamp(captured_at_s),
+        source_id=identity["source_id"],
+        source_type=identity["source_type"],
+        identity=identity.copy(),
+    )
 
 
-def classify_stamp(stamp_ns: int | None, now_wall_s: float, use_sim_time: bool) -> dict[str, Any]:
+def classify_stamp(stamp_ns: int | None, now_wall_s: float, use_sim_time: bool) -> Stamp:
     """A header stamp as ``{"clock": ..., "stamp" | "stamp_s": ...}`` (see module doc)."""
     if stamp_ns is None:
-        return {"clock": "none"}
+        return Stamp(clock="none")
     seconds = stamp_ns / 1e9
     if use_sim_time:
-        return {"clock": "sim", "stamp_s": round(seconds, 6)}
+        return Stamp(clock="sim", stamp_s=round(seconds, 6))
     if EPOCH_2000_S <= seconds <= now_wall_s + FUTURE_TOLERANCE_S:
-        return {"clock": "epoch", "stamp": format_timestamp(seconds)}
-    return {"clock": "non_epoch", "stamp_s": round(seconds, 6)}
+        return Stamp(clock="epoch", stamp=format_timestamp(seconds))
+    return Stamp(clock="non_epoch", stamp_s=round(seconds, 6))

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from phytrace_edge.builder.defaults import ROSOUT_LEVELS
 from phytrace_edge.builder.envelope import classify_stamp, envelope
 from phytrace_edge.ingest.readings import LogReading
+from phytrace_edge.udm.types import LogRecordEvent, UdmIdentity
 
 EVENT_TYPE_LOG = "log.record"
 WINDOW_S = 60.0
@@ -85,15 +85,25 @@ class LogRecords:
 
 
 def log_event(
-    identity: Mapping[str, str],
+    identity: UdmIdentity,
     record: dict[str, Any],
     captured_at_s: float,
     use_sim_time: bool = False,
-) -> dict[str, Any]:
+) -> LogRecordEvent:
     """One ``log.record`` event (docs/udm.md)."""
-    fields = {key: value for key, value in record.items() if key != "stamp_ns"}
-    return {
+    event: LogRecordEvent = {
         **envelope(identity, EVENT_TYPE_LOG, captured_at_s),
-        **fields,
+        "level": record["level"],
+        "logger": record["logger"],
+        "message": record["message"],
         **classify_stamp(record.get("stamp_ns"), captured_at_s, use_sim_time),
     }
+    if "file" in record:
+        event["file"] = record["file"]
+    if "function" in record:
+        event["function"] = record["function"]
+    if "line" in record:
+        event["line"] = record["line"]
+    if "suppressed" in record:
+        event["suppressed"] = record["suppressed"]
+    return event

@@ -12,6 +12,7 @@ from phytrace_edge.builder.defaults import (
 )
 from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY
 from phytrace_edge.ingest.topics import ExtraTopic
+from phytrace_edge.udm.types import UdmIdentity
 
 
 @dataclass(frozen=True)
@@ -23,8 +24,13 @@ class Identity:
     fleet_id: str | None = None
     site_id: str | None = None
 
-    def as_dict(self) -> dict[str, str]:
-        return {key: value for key, value in vars(self).items() if value is not None}
+    def as_dict(self) -> UdmIdentity:
+        identity = UdmIdentity(source_id=self.source_id, source_type=self.source_type)
+        if self.fleet_id is not None:
+            identity["fleet_id"] = self.fleet_id
+        if self.site_id is not None:
+            identity["site_id"] = self.site_id
+        return identity
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
 from phytrace_edge.builder.assemble import DOMAINS
-from phytrace_edge.builder.builder import Built, UDMBuilder
+from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.udm.types import Built
 
 Event = dict[str, Any]
 Taken = TypeVar("Taken")

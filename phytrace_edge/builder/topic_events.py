@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,6 +21,7 @@ from phytrace_edge.ingest.convert import stamp_ns
 from phytrace_edge.ingest.generic import FieldTypes, Repairs, message_data, message_type_name
 from phytrace_edge.ingest.safe_text import TEXT_REPAIRED
 from phytrace_edge.ingest.topics import ExtraTopic
+from phytrace_edge.udm.types import TopicEvent, TopicMode, UdmIdentity
 
 EVENT_TYPE_TOPIC = "telemetry.topic"
 READY_MAX = 10_000  # converted messages waiting for the tick; beyond, counted as dropped
@@ -32,7 +33,7 @@ class TopicSample:
 
     topic: str
     type_name: str
-    mode: str
+    mode: TopicMode
     data: dict[str, Any]
     received_mono_s: float
     stamp_ns: int | None
@@ -148,12 +149,12 @@ def changed(old: Any, new: Any, deadband: float) -> bool:
 
 
 def topic_event(
-    identity: Mapping[str, str],
+    identity: UdmIdentity,
     sample: TopicSample,
     captured_at_s: float,
     now_mono_s: float,
     use_sim_time: bool = False,
-) -> dict[str, Any]:
+) -> TopicEvent:
     """One ``telemetry.topic`` event (docs/udm.md)."""
     return {
         **envelope(identity, EVENT_TYPE_TOPIC, captured_at_s),

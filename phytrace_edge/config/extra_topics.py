@@ -64,6 +64,7 @@ def _entry(name: Any, options: Any) -> ExtraTopic:
         raise ValueError(ALLOWED)
     if mode not in EXTRA_MODES or ("deadband" in options and mode != "on_change"):
         raise ValueError(ALLOWED)
+    mode = EXTRA_MODES[EXTRA_MODES.index(mode)]  # the checked text, as a TopicMode
     rate_hz = _number(options.get("rate_hz", 1.0))
     deadband = _number(options.get("deadband", 0.0))
     if not 0 < rate_hz <= MAX_RATE_HZ:

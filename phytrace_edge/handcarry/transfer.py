@@ -17,7 +17,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 from phytrace_edge.errors import QueueError
 from phytrace_edge.handcarry import format as handcarry
@@ -32,6 +32,7 @@ from phytrace_edge.handcarry.format import (
 )
 from phytrace_edge.queue.records import Batch
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.udm.types import Built, UdmEvent
 
 # a batch is a chunk of the file: zstd compresses a day of events 10% better in 4 MiB
 # chunks than in 1 MiB ones (docs/operations.md, "Hand-carry")
@@ -162,16 +163,16 @@ def open_handcarry(path: Path) -> HandcarryReader:
     raise NotAnExport(str(path), "byte 0", "not a phytrace-edge export (neither MCAP nor .phx)")
 
 
-def export_chunks(
-    path: Path, size: int
-) -> Iterator[tuple[list[dict[str, Any]], DamagedExport | None]]:
-    """A hand-carry file's events in chunks of ``size``, each with None, and the last
-    with the damage found (``DamagedExport``) if the file is not whole: the events
-    before the first bad record still come, so an import keeps what can be kept."""
-    chunk: list[dict[str, Any]] = []
+def export_chunks(path: Path, size: int) -> Iterator[tuple[list[Built], DamagedExport | None]]:
+    """A hand-carry file's events in chunks of ``size``, as the queue takes them, each
+    with None, and the last with the damage found (``DamagedExport``) if the file is
+    not whole: the events before the first bad record still come, so an import keeps
+    what can be kept. The file holds events as a queue held them, without their class:
+    they come back periodic (an import sends them at once; nothing thins them)."""
+    chunk: list[Built] = []
     try:
         for event in open_handcarry(path).events():
-            chunk.append(event)
+            chunk.append(Built(cast(UdmEvent, event)))
             if len(chunk) >= size:
                 yield chunk, None
                 chunk = []

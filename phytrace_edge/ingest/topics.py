@@ -21,6 +21,7 @@ from typing import Any, Literal, NamedTuple, get_args
 
 from phytrace_edge.ingest import handlers, robot_status, rosout
 from phytrace_edge.ingest.readings import Reading
+from phytrace_edge.udm.types import TopicMode
 
 Domain = Literal[
     "location",
@@ -115,7 +116,7 @@ TOPICS: tuple[TopicSpec, ...] = (
 TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
 TOPIC_NAMES = tuple(TOPIC_BY_NAME)
 
-EXTRA_MODES = ("sample", "on_change")
+EXTRA_MODES: tuple[TopicMode, ...] = get_args(TopicMode)
 
 
 class ExtraTopic(NamedTuple):
@@ -129,7 +130,7 @@ class ExtraTopic(NamedTuple):
     name: str
     type_name: str = ""
     rate_hz: float = 1.0
-    mode: str = "sample"
+    mode: TopicMode = "sample"
     deadband: float = 0.0
 
     def describe(self) -> str:

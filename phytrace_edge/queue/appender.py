@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import orjson
 
@@ -26,6 +25,7 @@ from phytrace_edge.queue.space.full_disk import FullDisk
 from phytrace_edge.queue.storage.database import Database, bump_counters
 from phytrace_edge.queue.storage.rows import NewRow, insert_rows
 from phytrace_edge.queue.timekeeping.repair import ClockKeeper
+from phytrace_edge.udm.types import Built, UdmEvent
 
 log = logging.getLogger(__name__)
 
@@ -54,19 +54,17 @@ class Appender:
 
     def put_many(
         self,
-        events: Sequence[dict[str, Any]],
-        important: Sequence[bool] | None,
+        built: Sequence[Built],
         after_commit: Callable[[], None] | None,
         upkeep: bool,
     ) -> PutResult:
-        """Queue events in one transaction (group commit); ``important`` gives each
-        event's class (default: all periodic). Never raises for a full queue or a full
-        disk: what cannot be kept is counted as a drop and logged. ``after_commit``
-        runs once they are counted, under the queue's lock (``locked``). Without
-        ``upkeep`` (a stop), what has waited is not sealed into frames now."""
-        classes = important if important is not None else [False] * len(events)
+        """Queue events in one transaction (group commit), each with its class. Never
+        raises for a full queue or a full disk: what cannot be kept is counted as a
+        drop and logged. ``after_commit`` runs once they are counted, under the queue's
+        lock (``locked``). Without ``upkeep`` (a stop), what has waited is not sealed
+        into frames now."""
         now = self._clock()  # when these were queued (queue time)
-        encoded = [self._encode(e, cls, now) for e, cls in zip(events, classes, strict=True)]
+        encoded = [self._encode(event, important, now) for event, important in built]
         rows = [row for row in encoded if row is not None]
         unencodable = len(encoded) - len(rows)  # counted with the rows, once they commit
         if not encoded:
@@ -87,7 +85,7 @@ class Appender:
                     after_commit()
             return PutResult(0, len(encoded))
 
-    def _encode(self, event: dict[str, Any], important: bool, now: float) -> NewRow | None:
+    def _encode(self, event: UdmEvent, important: bool, now: float) -> NewRow | None:
         """The row of one event, queued at ``now``; None (logged) for an event JSON
         cannot hold, so that one bad event never costs its group."""
         try:

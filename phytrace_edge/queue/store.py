@@ -54,6 +54,7 @@ from phytrace_edge.queue.storage.service_state import write_service_state
 from phytrace_edge.queue.storage.sqlite_errors import queue_error
 from phytrace_edge.queue.timekeeping.clock import SystemClocks
 from phytrace_edge.queue.timekeeping.repair import ClockKeeper
+from phytrace_edge.udm.types import Built, UdmEvent
 
 log = logging.getLogger(__name__)
 
@@ -199,19 +200,19 @@ class QueueStore:
 
     # ------------------------------------------------------------------ put
 
-    def put(self, event: dict[str, Any], important: bool = False) -> PutResult:
+    def put(self, event: UdmEvent, important: bool = False) -> PutResult:
         """Queue one event; returns once it is durable (see module doc)."""
-        return self.put_many([event], [important])
+        return self.put_many([Built(event, important)])
 
     def put_many(
         self,
-        events: Sequence[dict[str, Any]],
-        important: Sequence[bool] | None = None,
+        built: Sequence[Built],
         after_commit: Callable[[], None] | None = None,
         upkeep: bool = True,
     ) -> PutResult:
-        """Queue events in one transaction (group commit): ``Appender.put_many``."""
-        return self._appender.put_many(events, important, after_commit, upkeep)
+        """Queue events, each with its class, in one transaction (group commit):
+        ``Appender.put_many``."""
+        return self._appender.put_many(built, after_commit, upkeep)
 
     def count_unqueued(self, reason: str, count: int) -> None:
         """Count events built that never reached the queue: ``Appender.count_unqueued``."""

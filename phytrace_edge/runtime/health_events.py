@@ -12,12 +12,12 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from phytrace_edge.builder.builder import Built
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.ingest.convert import present
 from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.runtime.health import Live, Thresholds, report
 from phytrace_edge.runtime.status_documents import ServiceDocument, StatusReport
+from phytrace_edge.udm.types import Built, HealthEvent, UdmIdentity, WallClock
 
 EVENT_TYPE_HEALTH = "bridge.health"
 PROBLEMS_MAX = 64
@@ -50,15 +50,15 @@ class HealthSchedule:
 
 
 def health_event(
-    identity: Mapping[str, str],
+    identity: UdmIdentity,
     report: StatusReport,
     trigger: str,
     uptime_s: float,
     captured_at_s: float,
-) -> dict[str, Any]:
+) -> HealthEvent:
     """One ``bridge.health`` event from a status document (``health.report``)."""
     queue = report["queue"]
-    event = {
+    event: HealthEvent = {
         **envelope(identity, EVENT_TYPE_HEALTH, captured_at_s),
         "trigger": trigger,
         "healthy": bool(report["healthy"]),
@@ -81,15 +81,18 @@ def health_event(
             topic: _topic(figures) for topic, figures in list(report["topics"].items())[:TOPICS_MAX]
         },
     }
-    if report.get("last_error_class"):
-        event["last_error_class"] = report["last_error_class"]
+    last_error_class = report.get("last_error_class")
+    if last_error_class:
+        event["last_error_class"] = last_error_class
     clock = report["clock"]
-    wall_clock = present(
-        synchronized=clock["synchronized"],
-        last_step_s=clock["last_step_s"],
-        last_step_at=clock["last_step_at"],
-    )
-    if wall_clock:  # the machine's clock, as the queue last saw it
+    wall_clock = WallClock()  # the machine's clock, as the queue last saw it
+    if clock["synchronized"] is not None:
+        wall_clock["synchronized"] = clock["synchronized"]
+    if clock["last_step_s"] is not None:
+        wall_clock["last_step_s"] = clock["last_step_s"]
+    if clock["last_step_at"] is not None:
+        wall_clock["last_step_at"] = clock["last_step_at"]
+    if wall_clock:
         event["wall_clock"] = wall_clock
     return event
 
@@ -113,13 +116,13 @@ class HealthEvents:
         self,
         interval_s: float,
         thresholds: Thresholds | None,
-        identity: Mapping[str, str],
+        identity: UdmIdentity,
         started_at: float,
         emit: Callable[[Built], None],
     ) -> None:
         self._schedule = HealthSchedule(interval_s if thresholds is not None else 0.0)
         self._thresholds = thresholds
-        self._identity = dict(identity)
+        self._identity = identity.copy()
         self._started_at = started_at
         self._emit = emit
 

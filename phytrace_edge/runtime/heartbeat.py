@@ -17,7 +17,6 @@ from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status
 from phytrace_edge.runtime.options import ServiceOptions
-from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
 from phytrace_edge.runtime.status_documents import (
     LedgerFigures,
@@ -29,6 +28,7 @@ from phytrace_edge.runtime.status_documents import (
     WriterFigures,
 )
 from phytrace_edge.runtime.supervisor import Supervisor
+from phytrace_edge.runtime.writer import QueueWriter
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.stats import SendStats
 
@@ -147,13 +147,13 @@ class Heartbeat:
         pipeline: Pipeline,
         store: QueueStore,
         sender: Sender,
-        outlet: Outlet,
+        writer: QueueWriter,
         supervisor: Supervisor,
         started_at: float,
         live_path: str | None = None,
     ) -> None:
         self.options, self.pipeline, self.store = options, pipeline, store
-        self.sender, self.outlet, self.supervisor = sender, outlet, supervisor
+        self.sender, self.writer, self.supervisor = sender, writer, supervisor
         self.started_at = started_at
         self.live_path = live_path
         self._rates = Rates()
@@ -199,11 +199,11 @@ class Heartbeat:
         return Figures(
             queue=queue,
             sender=self.sender.stats,
-            events_built=self.outlet.events_built,
+            events_built=self.writer.events_handed,
             topics=self.topics(self._rates.rates),
             thread_restarts=dict(self.supervisor.restarts),
             now=self.store.now(),
-            writer=self.outlet.writer.figures(),
+            writer=self.writer.figures(),
         )
 
     def document(self, running: bool) -> ServiceDocument:
@@ -220,7 +220,7 @@ class Heartbeat:
             {**sender, "send_rate_eps": rates.get("send", 0.0)},
             self.topics(rates),
             self.stages(),
-            self.outlet.events_built,
+            self.writer.events_handed,
             self.started_at,
             self.moment(running),
         )
@@ -229,7 +229,7 @@ class Heartbeat:
         """The queue's counters and the ledger of one moment: now, or, when the queue
         is busy past SNAPSHOT_WAIT_S (a commit on a slow disk) or cannot be read, the
         last moment they were read together; the writer's figures are always now."""
-        writer = self.outlet.writer
+        writer = self.writer
         try:
             snapshot = writer.snapshot(SNAPSHOT_WAIT_S)
         except QueueError:

@@ -26,10 +26,10 @@ from phytrace_edge.runtime.health_events import HealthEvents
 from phytrace_edge.runtime.heartbeat import HEARTBEAT_S, Heartbeat
 from phytrace_edge.runtime.logs import RepeatedLine
 from phytrace_edge.runtime.options import ServiceOptions
-from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
 from phytrace_edge.runtime.sd_notify import status_line
 from phytrace_edge.runtime.supervisor import Beat, Supervisor, Worker
+from phytrace_edge.runtime.writer import QueueWriter
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.units import format_bytes
 
@@ -52,7 +52,7 @@ class BridgeService:
         pipeline: Pipeline,
         store: QueueStore,
         sender: Sender,
-        outlet: Outlet,
+        writer: QueueWriter,
         heartbeat: Heartbeat,
         health_events: HealthEvents,
         supervisor: Supervisor,
@@ -61,7 +61,7 @@ class BridgeService:
         self.pipeline = pipeline
         self.store = store
         self.sender = sender
-        self.outlet = outlet
+        self.writer = writer
         self.heartbeat = heartbeat
         self.health_events = health_events
         self.supervisor = supervisor
@@ -95,7 +95,7 @@ class BridgeService:
         """Open the input and start every worker."""
         self.pipeline.open()
         start = self.supervisor.start
-        start(Worker("writer", self.outlet.writer.run, self.outlet.writer.stop))
+        start(Worker("writer", self.writer.run, self.writer.stop))
         start(Worker("sender", self.sender.run, self.sender.stop))
         start(Worker("heartbeat", self._heartbeat_loop))
         start(Worker("maintenance", self._maintenance_loop))
@@ -189,7 +189,7 @@ class BridgeService:
         self.pipeline.close()
         sup.stop("heartbeat", left())
         self._stop_health_event()
-        writer = self.outlet.writer
+        writer = self.writer
         writer.request_stop(within_s=max(0.0, flush_by - time.monotonic()))
         if not sup.stop("writer", left(grace_s + STOP_TIMEOUT_S)):
             writer.abandon()  # a commit still under way on a disk that hangs
@@ -222,7 +222,7 @@ class BridgeService:
     def _record_stop(self) -> bool:
         """The final figures, into the live status and the queue; False when the queue
         could not take them (the live status then holds the truth)."""
-        writer = self.outlet.writer
+        writer = self.writer
         try:
             self.heartbeat.write(running=False)
             left = self.store_depth_at_stop = self.store.counter("depth")

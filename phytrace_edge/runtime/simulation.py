@@ -15,14 +15,14 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from phytrace_edge.builder.builder import Built
 from phytrace_edge.config import Settings
 from phytrace_edge.runtime import wiring
 from phytrace_edge.udm.schema import check_event
+from phytrace_edge.udm.types import Built, UdmEvent
 
 log = logging.getLogger(__name__)
 
-Event = dict[str, Any]
+Event = UdmEvent
 
 
 def run_simulation(

@@ -28,10 +28,9 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from phytrace_edge import host_clock
-from phytrace_edge.builder.builder import Built, UDMBuilder
+from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.sampler import Sampler, TickInput
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import QueueError
@@ -46,7 +45,6 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status, options
 from phytrace_edge.runtime.health_events import HealthEvents
 from phytrace_edge.runtime.heartbeat import Heartbeat
-from phytrace_edge.runtime.outlet import Outlet
 from phytrace_edge.runtime.pipeline import Pipeline
 from phytrace_edge.runtime.preflight import warn_if_not_on_a_volume
 from phytrace_edge.runtime.service import BridgeService
@@ -56,6 +54,7 @@ from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import HttpTransport, Transport
 from phytrace_edge.udm.schema import prepare_validator
+from phytrace_edge.udm.types import Built, UdmEvent
 
 # A file being imported is staged a chunk at a time: never full, and events days old
 # must not expire while staged.
@@ -155,7 +154,7 @@ def build_service(
     env: Mapping[str, str],
     ros_args: Sequence[str] = (),
     transport: Transport | None = None,
-    on_event: Callable[[dict[str, Any]], None] | None = None,
+    on_event: Callable[[UdmEvent], None] | None = None,
 ) -> BridgeService:
     """Every part of the bridge, wired; ``transport`` replaces HTTP in tests and
     ``on_event`` sees every event built."""
@@ -230,26 +229,26 @@ def _service(
     source: Source,
     store: QueueStore,
     transport: Transport,
-    on_event: Callable[[dict[str, Any]], None] | None,
+    on_event: Callable[[UdmEvent], None] | None,
     live_path: str | None,
 ) -> BridgeService:
     link = transport.figures() if isinstance(transport, HttpTransport) else {}
     service_options = dataclasses.replace(options.service_options(s), link=link)
     started_at = store.now()
     sender = Sender(store, transport, options.send_policy(s))
-    outlet = Outlet(QueueWriter(store), wait_for_disk=source.keeps_time, on_event=on_event)
-    pipeline = build_pipeline(s, source, outlet.emit)
+    writer = QueueWriter(store, wait_for_disk=source.keeps_time, on_event=on_event)
+    pipeline = build_pipeline(s, source, writer.emit)
     supervisor = Supervisor()
     heartbeat = Heartbeat(
-        service_options, pipeline, store, sender, outlet, supervisor, started_at, live_path
+        service_options, pipeline, store, sender, writer, supervisor, started_at, live_path
     )
     health_events = HealthEvents(
         service_options.health_event_interval_s,
         service_options.thresholds,
         pipeline.builder.identity,
         started_at,
-        outlet.emit,
+        writer.emit,
     )
     return BridgeService(
-        service_options, pipeline, store, sender, outlet, heartbeat, health_events, supervisor
+        service_options, pipeline, store, sender, writer, heartbeat, health_events, supervisor
     )

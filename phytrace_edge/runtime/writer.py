@@ -1,4 +1,9 @@
-"""QueueWriter: events from the sample tick into the queue, on a thread of their own.
+"""QueueWriter: where built events leave the pipeline, into the queue, on a thread of
+their own.
+
+``emit`` is where the sampler and the health events hand a built event over: it is
+checked against the UDM schema (a violation is logged and the event still kept),
+counted, shown to an observer (the tests) and queued for the writer's thread.
 
 The tick must never wait for the disk: an fsync on slow robot flash can take tens of
 milliseconds, a failing SD card seconds. The tick hands the event over in memory
@@ -28,11 +33,12 @@ from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from phytrace_edge.builder.builder import Built
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime.status_documents import LedgerFigures, WriterFigures
+from phytrace_edge.udm.schema import check_event
+from phytrace_edge.udm.types import Built, UdmEvent
 
 log = logging.getLogger(__name__)
 
@@ -76,10 +82,21 @@ class _Commits:
 
 
 class QueueWriter:
-    """``put`` from any thread; ``run`` is the writer's loop (supervised)."""
+    """``emit`` (or ``put``) from any thread; ``run`` is the writer's loop (supervised).
 
-    def __init__(self, store: QueueStore, monotonic: Callable[[], float] = time.monotonic) -> None:
+    With ``wait_for_disk`` (an input that keeps its own time, a bag) ``emit`` waits for
+    room instead of outrunning the disk; ``on_event`` sees every event emitted."""
+
+    def __init__(
+        self,
+        store: QueueStore,
+        monotonic: Callable[[], float] = time.monotonic,
+        wait_for_disk: bool = False,
+        on_event: Callable[[UdmEvent], None] | None = None,
+    ) -> None:
         self.store = store
+        self.wait_for_disk = wait_for_disk
+        self._on_event = on_event
         self.stop = threading.Event()
         self._monotonic = monotonic
         self._pending: deque[tuple[float, Built]] = deque()  # (handed over at, event)
@@ -95,6 +112,13 @@ class QueueWriter:
         self.events_handed = 0
         self.events_written = 0
         self.dropped: Counter[str] = Counter()
+
+    def emit(self, built: Built) -> None:
+        """Hand over an event as it leaves the pipeline (see the module doc)."""
+        check_event(built.event, log)
+        if self._on_event is not None:
+            self._on_event(built.event)
+        self.put(built, wait=self.wait_for_disk)
 
     def put(self, built: Built, wait: bool = False) -> None:
         """Hand an event over; never blocks on disk unless asked to ``wait`` for room
@@ -214,8 +238,7 @@ class QueueWriter:
             # drops by the caps, and an event that cannot be encoded, are counted by
             # the store
             self.store.put_many(
-                [b.event for b in group],
-                [b.important for b in group],
+                group,
                 after_commit=written,
                 upkeep=not self.stop.is_set(),  # a stop: no fsyncs beyond the events' own
             )

@@ -47,12 +47,17 @@ from phytrace_edge.queue.records import Batch, DeadLetter, QueuedEvent
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.ship.lanes import Lanes
 from phytrace_edge.ship.options import SendPolicy
-from phytrace_edge.ship.request import BodyEncoder, Prepared, events_body, request_headers
 from phytrace_edge.ship.responses import Accepted, Outcome, classify, split_refused
 from phytrace_edge.ship.retries import UNACCOUNTED_BEFORE_SPLIT, Backoff, say_halving, say_retrying
 from phytrace_edge.ship.stats import SendStats
 from phytrace_edge.ship.throttle import Throttle
-from phytrace_edge.ship.transport import Transport
+from phytrace_edge.ship.transport import (
+    BodyEncoder,
+    Prepared,
+    Transport,
+    events_body,
+    request_headers,
+)
 
 log = logging.getLogger(__name__)
 

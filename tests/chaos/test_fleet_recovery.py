@@ -19,6 +19,7 @@ from phytrace_edge.ship.transport import HttpTransport
 from phytrace_edge.udm.event import new_event_id
 from phytrace_edge.units import MIB
 from tests.processes import wait_for
+from tests.queue_events import put_events
 
 ROBOTS = 20
 RETRY_MAX_S = 2.0
@@ -44,7 +45,7 @@ def test_twenty_bridges_resume_spread_over_the_jitter_window(tmp_path: Path, stu
     stores, senders, threads = [], [], []
     for robot in range(ROBOTS):
         store = QueueStore.open(tmp_path / f"q{robot}.db", limits=QueueLimits(max_bytes=64 * MIB))
-        store.put_many(robot_events(template, robot))
+        put_events(store, robot_events(template, robot))
         sender = Sender(
             store,
             HttpTransport(stub.endpoint, Secret(""), timeout_s=5),

@@ -21,10 +21,10 @@ import time
 
 import httpx
 
-from phytrace_edge.builder.builder import Built
 from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.runtime.options import queue_path
 from phytrace_edge.udm.event import parse_timestamp
+from phytrace_edge.udm.types import Built
 from tests.processes import wait_for
 
 RATE_HZ = 50
@@ -58,14 +58,14 @@ def test_after_an_outage_the_present_comes_first_and_nothing_important_is_thinne
     )
     service, built, settings = bridge.service, bridge.built, bridge.settings
     important: set[str] = set()
-    queue_event = service.outlet.writer.put
+    queue_event = service.writer.put
 
     def note_class(event: Built, wait: bool = False) -> None:  # the builder's own verdict
         if event.important:
             important.add(event.event["event_id"])
         queue_event(event, wait)
 
-    service.outlet.writer.put = note_class  # type: ignore[method-assign]
+    service.writer.put = note_class  # type: ignore[method-assign]
     service.start()
     wait_for(lambda: stub.stats()["unique"] >= 20, 30, "the first events at the stub")
     stub.kill()

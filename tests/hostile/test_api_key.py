@@ -22,6 +22,7 @@ from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import HttpTransport
 from tests.hostile.servers import BadServer
 from tests.processes import BridgeProcess, free_port, python_env, run_cli, status_json, wait_for
+from tests.queue_events import put_events
 
 KEY = "phk_live_Zq8v2K9x7Lw3"
 
@@ -151,7 +152,7 @@ def queue_files(queue: Path) -> bytes:
 def test_a_key_echoed_with_json_escapes_is_masked_once_decoded(tmp_path: Path) -> None:
     queue = tmp_path / "q.db"
     store = QueueStore.open(queue)
-    store.put_many([{"event_id": f"e{i}", "n": i} for i in range(10)])
+    put_events(store, [{"event_id": f"e{i}", "n": i} for i in range(10)])
     with BadServer(echo_escaped_key_in_rejections) as server:
         transport = HttpTransport(server.endpoint, Secret(SLASHED_KEY), 5.0)
         sender = Sender(store, transport, SendPolicy(batch_size=10))

@@ -18,6 +18,7 @@ from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import MAX_REPLY_BYTES, HttpTransport
 from tests.hostile.servers import BadServer, answer, elapsed, huge_body, trickle
 from tests.processes import BridgeProcess, status_json, wait_for
+from tests.queue_events import put_events
 
 BODY = b'{"events":[{"event_id":"x"}]}'
 HEADERS = {"Content-Type": "application/json"}
@@ -67,7 +68,7 @@ def test_retry_after_never_makes_a_tight_loop(tmp_path: Path, retry_after: str) 
 
 def test_a_captive_portal_200_does_not_delete_the_batch(tmp_path: Path) -> None:
     store = QueueStore.open(tmp_path / "q.db")
-    store.put_many([{"event_id": f"e{i}"} for i in range(5)])
+    put_events(store, [{"event_id": f"e{i}"} for i in range(5)])
     portal = answer(
         "200 OK",
         {"Content-Type": "text/html"},
@@ -87,8 +88,8 @@ def test_a_captive_portal_200_does_not_delete_the_batch(tmp_path: Path) -> None:
 
 def _send_once(sender: Sender) -> None:
     """One attempt of one batch, the classification raised rather than retried."""
-    from phytrace_edge.ship.request import request_headers
     from phytrace_edge.ship.responses import classify
+    from phytrace_edge.ship.transport import request_headers
 
     batch = sender.store.claim_batch(10, 10**6)
     assert batch is not None

@@ -21,6 +21,7 @@ import pytest
 from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.queue.store import QueueStore
 from tests.processes import BridgeProcess, python_env, run_cli, wait_for
+from tests.queue_events import put_events
 
 ROOT = pytest.mark.skipif(os.geteuid() != 0, reason="needs root (mknod, mount); CI runs as root")
 
@@ -117,7 +118,7 @@ sys.stdin.read()
 def test_a_killed_owners_claims_are_taken_back_at_once(tmp_path: Path) -> None:
     path = tmp_path / "queue.db"
     with QueueStore.open(path) as store:
-        store.put_many([{"event_id": f"e{i}"} for i in range(30)])
+        put_events(store, [{"event_id": f"e{i}"} for i in range(30)])
     owner = subprocess.Popen(
         [sys.executable, "-c", CLAIM_AND_WAIT, str(path)],
         stdin=subprocess.PIPE,
@@ -169,7 +170,7 @@ def test_status_reads_a_queue_on_a_read_only_volume(
     source = tmp_path / "rw"
     source.mkdir()
     with QueueStore.open(source / "queue.db") as store:
-        store.put_many([{"event_id": f"e{i}"} for i in range(7)])
+        put_events(store, [{"event_id": f"e{i}"} for i in range(7)])
     place = read_only_mount(source)
     result = run_cli("status", "--json", timeout=60, QUEUE_PATH=str(place / "queue.db"))
     assert result.returncode == 3, result.stderr  # not running, and readable

@@ -18,6 +18,7 @@ import orjson
 
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.udm.types import Built
 from phytrace_edge.units import GIB, MIB
 
 LIMITS = QueueLimits(max_bytes=GIB)
@@ -71,14 +72,14 @@ def rss(path: str, count: int) -> None:
     samples: list[dict] = []
     run_simulation(50, sink=samples.append)
     store = QueueStore.open(path, limits=LIMITS, sync="normal")
-    store.put_many(samples[:1])
+    store.put_many([Built(samples[0])])
     batch = store.claim_batch(1, MIB)
     store.ack(batch)
     before = rss_kib()
     for start in range(0, count, 1000):
         store.put_many(
             [
-                {**samples[i % len(samples)], "event_id": str(uuid.uuid4())}
+                Built({**samples[i % len(samples)], "event_id": str(uuid.uuid4())})
                 for i in range(start, start + 1000)
             ]
         )

@@ -20,6 +20,7 @@ from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.udm.schema import SCHEMA_VERSION
 from tests.processes import python_env, run_cli, wait_for
+from tests.queue_events import put_events
 from tests.udm_events import EVENT_TYPES, every_type
 
 IDENTITY = {"source_id": "mine-amr-3", "source_type": "amr"}
@@ -32,7 +33,7 @@ def fill_robot_queue(path: Path, count: int) -> list[str]:
     events = every_type(count, IDENTITY, START_S)
     with QueueStore.open(path) as store:
         for start in range(0, count, 5000):
-            store.put_many(events[start : start + 5000])
+            put_events(store, events[start : start + 5000])
     return [event["event_id"] for event in events]
 
 

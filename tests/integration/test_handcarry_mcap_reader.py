@@ -22,6 +22,7 @@ from phytrace_edge.handcarry.transfer import open_handcarry
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.udm.schema import event_type_schema
 from tests.processes import run_cli
+from tests.queue_events import put_events
 from tests.udm_events import EVENT_TYPES, every_type
 
 READER = Path(__file__).with_name("mcap_reader")
@@ -50,7 +51,7 @@ def test_every_exported_file_reads_in_the_mcap_typescript_libraries(tmp_path: Pa
     identity = {"source_id": "mine-amr-3", "source_type": "amr"}
     events = every_type(4000, identity, 1_795_300_000.0, step_s=0.137)  # odd milliseconds
     with QueueStore.open(queue) as store:
-        store.put_many(events)
+        put_events(store, events)
     settings = {"QUEUE_PATH": str(queue), "SOURCE_ID": "mine-amr-3"}
     files = []
     for n in range(1, 10):

@@ -18,6 +18,7 @@ import pytest
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import GIB
+from tests.queue_events import put_events
 
 WORKER = str(Path(__file__).with_name("queue_worker.py"))
 ROOT = str(Path(__file__).parents[2])
@@ -76,8 +77,9 @@ def test_two_processes_drain_each_event_exactly_once(tmp_path: Path) -> None:
     store = QueueStore.open(path, limits=QueueLimits(max_bytes=GIB))
     total = 5000
     for start in range(0, total, 500):
-        store.put_many(
-            [{"event_id": str(uuid.UUID(int=i)), "seq": i} for i in range(start, start + 500)]
+        put_events(
+            store,
+            [{"event_id": str(uuid.UUID(int=i)), "seq": i} for i in range(start, start + 500)],
         )
     store.close()
     outs = [tmp_path / "a.txt", tmp_path / "b.txt"]

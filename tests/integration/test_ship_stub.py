@@ -18,6 +18,7 @@ from phytrace_edge.ship.options import SendPolicy
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import HttpTransport
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +43,7 @@ def make_sender(queue, stub, key: str = "", stop=None, sleep=None, **policy) -> 
 
 @pytest.mark.parametrize("encoding", ["gzip", "zstd", "none"])
 def test_every_event_arrives_exactly_once(queue, stub, sim_events, encoding: str) -> None:
-    queue.put_many(sim_events)
+    put_events(queue, sim_events)
     sender = make_sender(queue, stub, http_compression=encoding)
     assert sender.drain(deadline=time.monotonic() + 60) is True
     assert sorted(stub.event_ids()) == sorted(e["event_id"] for e in sim_events)
@@ -55,7 +56,7 @@ def test_every_event_arrives_exactly_once(queue, stub, sim_events, encoding: str
 
 def test_api_key_is_checked_and_never_dropped(queue, stub_factory, sim_events) -> None:
     stub = stub_factory("--api-key", "phk_test_secret")
-    queue.put_many(sim_events[:30])
+    put_events(queue, sim_events[:30])
     waits: list[float] = []
     stop = threading.Event()
 
@@ -77,7 +78,7 @@ def test_api_key_is_checked_and_never_dropped(queue, stub_factory, sim_events) -
 
 def test_503_with_retry_after_is_honoured_then_recovers(queue, stub, sim_events) -> None:
     stub.set_faults(fixed_status=503, retry_after="2")
-    queue.put_many(sim_events[:20])
+    put_events(queue, sim_events[:20])
     waits: list[float] = []
 
     def wait_and_recover(seconds: float) -> None:
@@ -97,7 +98,7 @@ def test_one_poisoned_event_in_a_batch_of_500(queue, stub, sim_events) -> None:
         for i in range(500)
     ]
     events[317] = {**events[317], "power": {"battery": {"state_of_charge_pct": 250.0}}}
-    queue.put_many(events)
+    put_events(queue, events)
     sender = make_sender(queue, stub, batch_size=500)
     assert sender.drain(deadline=time.monotonic() + 60) is True
     assert stub.stats()["unique"] == 499
@@ -109,7 +110,7 @@ def test_one_poisoned_event_in_a_batch_of_500(queue, stub, sim_events) -> None:
 def test_partial_rejections_in_a_200_are_dead_lettered(queue, stub_factory, sim_events) -> None:
     stub = stub_factory("--partial-rejects")
     bad = {**sim_events[1], "source_type": "boat"}
-    queue.put_many([sim_events[0], bad, sim_events[2]])
+    put_events(queue, [sim_events[0], bad, sim_events[2]])
     assert make_sender(queue, stub).drain(deadline=time.monotonic() + 30) is True
     assert stub.stats()["unique"] == 2
     (letter,) = queue.dead_letters.list()
@@ -121,7 +122,7 @@ def test_dropped_connections_lose_nothing_and_duplicates_are_counted(
 ) -> None:
     stub = stub_factory("--drop-rate", "0.4", "--seed", "3")
     events = sim_events[:250]
-    queue.put_many(events)
+    put_events(queue, events)
     sender = make_sender(queue, stub, batch_size=20, retry_min_s=0.01, retry_max_s=0.05)
     assert sender.drain(deadline=time.monotonic() + 60) is True
     stats = stub.stats()

@@ -25,6 +25,7 @@ from tests.network.delivery import (
 from tests.network.pki import CertificateAuthority
 from tests.network.proxy import ConnectProxy
 from tests.processes import StubProcess, run_cli, status_json, wait_for
+from tests.queue_events import put_events
 from tests.udm_events import every_type
 
 KEY = "phk_live_proxy_test_key_0123456789"
@@ -142,7 +143,9 @@ def test_drain_goes_through_the_proxy(
 ) -> None:
     queue = tmp_path / "queue.db"
     with QueueStore.open(queue) as store:
-        store.put_many(every_type(25, {"source_id": "amr-17", "source_type": "amr"}, time.time()))
+        put_events(
+            store, every_type(25, {"source_id": "amr-17", "source_type": "amr"}, time.time())
+        )
     with ConnectProxy(routes(https_stub)) as proxy:
         done = run_cli(
             "drain",

@@ -13,13 +13,14 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import DeadLetter
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 
 
 @pytest.fixture
 def queue_path(tmp_path: Path) -> str:
     path = tmp_path / "queue.db"
     with QueueStore.open(path, limits=QueueLimits(max_bytes=64 * MIB)) as store:
-        store.put_many([{"event_id": f"e{i}", "seq": i} for i in range(3)])
+        put_events(store, [{"event_id": f"e{i}", "seq": i} for i in range(3)])
         batch = store.claim_batch(3, MIB)
         store.ack(batch, [DeadLetter(batch.events[1].id, "rejected: 422", 422, "bad seq")])
     return str(path)

@@ -12,12 +12,13 @@ import pytest
 
 from phytrace_edge.queue.storage import file_watch
 from phytrace_edge.queue.store import QueueStore
+from tests.queue_events import put_events
 
 
 @pytest.fixture
 def store(tmp_path: Path) -> Iterator[QueueStore]:
     with QueueStore.open(tmp_path / "q" / "queue.db") as store:
-        store.put_many([{"event_id": f"e{n}", "n": n} for n in range(50)])
+        put_events(store, [{"event_id": f"e{n}", "n": n} for n in range(50)])
         yield store
 
 
@@ -41,7 +42,7 @@ def test_a_deleted_file_is_copied_back_with_its_events_and_new_ones(store: Queue
     assert file_watch.look(store.file_keeper._descriptor, store.path).state == file_watch.DELETED
     assert store.watch_file().state == file_watch.OK
     assert store.file_keeper.restored == 1
-    store.put_many([{"event_id": "after", "n": 50}])
+    put_events(store, [{"event_id": "after", "n": 50}])
     assert store.counter("depth") == 51
     assert depth_on_disk(store.path) == 51  # the file at the path is the one written to
 
@@ -75,7 +76,7 @@ def test_a_gone_folder_is_named_and_nothing_is_made_in_its_place(
     assert state.state == file_watch.FOLDER_GONE
     assert str(tmp_path / "elsewhere" / "queue.db") in str(state.describe(store.path))
     assert not folder.exists()
-    store.put_many([{"event_id": "meanwhile", "n": 50}])  # still written, to the open file
+    put_events(store, [{"event_id": "meanwhile", "n": 50}])  # still written, to the open file
     (tmp_path / "elsewhere").rename(folder)
     assert store.watch_file().state == file_watch.OK
     assert depth_on_disk(store.path) == 51

@@ -24,6 +24,7 @@ from phytrace_edge.handcarry.transfer import export_backlog, open_handcarry
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.udm.schema import event_type_schema
 from tests.handcarry_files import read_all
+from tests.queue_events import put_events
 from tests.udm_events import EVENT_TYPES, every_type
 
 IDENTITY = {"source_id": "amr-1", "source_type": "amr"}
@@ -222,13 +223,13 @@ def test_any_events_survive_export_and_import_byte_for_byte(batch: list[dict]) -
     with tempfile.TemporaryDirectory() as folder:
         robot, laptop = Path(folder) / "robot.db", Path(folder) / "laptop.db"
         with QueueStore.open(robot) as store:
-            assert store.put_many(batch).accepted == len(batch)
+            assert put_events(store, batch).accepted == len(batch)
             manifest = export_backlog(store, Path(folder) / "x.mcap", "amr-1", 2**40)
         assert manifest is not None and manifest.events == len(batch)
         carried = list(open_handcarry(Path(folder) / "x.mcap").events())
         assert [orjson.dumps(event) for event in carried] == [orjson.dumps(e) for e in batch]
         with QueueStore.open(laptop) as store:
-            store.put_many(carried)
+            put_events(store, carried)
             claimed = store.claim_batch(1000, 2**30, important_first=False)
         assert claimed is not None
         assert [event.json for event in claimed.events] == [orjson.dumps(e) for e in batch]

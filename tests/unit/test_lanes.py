@@ -18,6 +18,7 @@ from phytrace_edge.ship.responses import Reply
 from phytrace_edge.ship.sender import Sender
 from phytrace_edge.ship.transport import FunctionTransport
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock
 from tests.unit.test_sender import FakeCloud, send_one
 
@@ -36,7 +37,7 @@ def store(tmp_path: Path, clock: Clock):
 
 
 def put(store: QueueStore, first: int, count: int) -> None:
-    store.put_many([{"event_id": f"e{i:05d}", "seq": i} for i in range(first, first + count)])
+    put_events(store, [{"event_id": f"e{i:05d}", "seq": i} for i in range(first, first + count)])
 
 
 class Outage(FakeCloud):

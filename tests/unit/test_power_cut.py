@@ -13,6 +13,7 @@ from phytrace_edge.queue.peek import read_stats
 from phytrace_edge.queue.space.reserve import SpaceReserve
 from phytrace_edge.queue.store import QueueStore
 from tests.processes import run_cli
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock, event
 
 
@@ -61,7 +62,7 @@ def test_status_and_run_both_see_an_empty_queue_after_a_cut_before_the_first_com
     store = QueueStore.open(path, clock=clock)  # run: the same empty queue, now with tables
     try:
         assert store.stats().depth == 0
-        store.put_many([event(1)])
+        put_events(store, [event(1)])
         assert store.stats().depth == 1
     finally:
         store.close()

@@ -25,6 +25,7 @@ from phytrace_edge.queue.timekeeping.repair import stamped_before
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.udm.event import format_timestamp
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import NOW, Y2001, Machine, event, put_stamped, seqs, stamped
 
 DAY = 86_400.0
@@ -63,7 +64,7 @@ def test_a_forward_step_expires_nothing_and_keeps_leases(tmp_path: Path) -> None
     stepped to the present, PhyCloud still down."""
     machine = Machine(wall=Y2001)
     store = open_store(tmp_path / "q.db", machine)
-    store.put_many([event(i) for i in range(5)])
+    put_events(store, [event(i) for i in range(5)])
     sending = store.claim_batch(2, MIB)
     machine.run(30.0)
     machine.wall, machine.synchronized = NOW, True  # NTP steps the clock by 25 years
@@ -83,7 +84,7 @@ def test_a_forward_step_expires_nothing_and_keeps_leases(tmp_path: Path) -> None
 def test_a_backward_step_keeps_the_ttl_running(tmp_path: Path) -> None:
     machine = Machine(wall=NOW)
     store = open_store(tmp_path / "q.db", machine)
-    store.put_many([event(i) for i in range(3)])
+    put_events(store, [event(i) for i in range(3)])
     machine.run(6 * DAY)
     machine.wall -= DAY  # set back a day
     assert store.record_clocks() == pytest.approx(-DAY)
@@ -100,7 +101,7 @@ def test_a_queue_written_under_a_wrong_clock_survives_a_reboot_onto_the_right_on
     are as old as the time the machine was seen running, not 25 years."""
     machine = Machine(wall=Y2001)
     store = open_store(tmp_path / "q.db", machine)
-    store.put_many([event(i) for i in range(4)])
+    put_events(store, [event(i) for i in range(4)])
     machine.run(120.0)
     store.maintain()
     store.close()
@@ -121,7 +122,7 @@ def rebooted_with_two_events(
     """Two events queued on a synchronized clock; then a reboot with ``wall``."""
     machine = Machine(wall=NOW, synchronized=True)
     store = open_store(tmp_path / "q.db", machine)
-    store.put_many([event(i) for i in range(2)])
+    put_events(store, [event(i) for i in range(2)])
     store.maintain()
     store.close()
     machine.reboot(wall=wall, synchronized=synchronized)
@@ -432,7 +433,7 @@ def test_an_event_in_flight_when_the_repair_ran_is_repaired_as_it_is_queued(
     ntp_steps(machine)
     assert store.record_clocks() == moved_by(NOW - Y2001)  # the queue's rows repaired
     machine.run(5.0)  # the writer was slow (a disk stall)
-    store.put_many(in_flight)
+    put_events(store, in_flight)
     put_stamped(store, machine, range(12, 14))  # stamped after the step, still unsynchronized
     events = claimed(store)
     assert corrections(events) == {
@@ -490,7 +491,7 @@ def test_an_event_in_flight_over_two_steps_is_moved_by_both(tmp_path: Path) -> N
     second = stamped(11, machine)  # on the stepped clock, still unsynchronized
     ntp_steps(machine, -5.0)  # chrony's second step
     assert store.record_clocks() == moved_by(-5.0)
-    store.put_many([first, second])
+    put_events(store, [first, second])
     assert corrections(claimed(store)) == {
         **{n: moved_by(NOW - Y2001 - 5.0) for n in range(11)},
         11: moved_by(-5.0),

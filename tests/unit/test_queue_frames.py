@@ -14,6 +14,7 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import DeadLetter
 from phytrace_edge.queue.storage.migrate import migrate
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock, event, seqs
 
 
@@ -111,7 +112,7 @@ def test_caps_and_ttl_take_whole_frames_and_count_every_event(open_store, clock)
     fill(store, clock, 0, 20)
     clock.now += SEAL_AFTER_S
     store.put(event(20))  # seals two frames
-    store.put_many([event(n) for n in range(21, 26)])  # one over the event cap
+    put_events(store, [event(n) for n in range(21, 26)])  # one over the event cap
     assert store.stats().drops == {"cap_events": 10}, "the oldest frame, all of it"
     assert seqs(store.claim_batch(100, MIB))[0] == 10
 

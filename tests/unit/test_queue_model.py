@@ -42,6 +42,7 @@ from phytrace_edge.queue.outbound.claims import BAND_S
 from phytrace_edge.queue.records import Batch, DeadLetter
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import GIB, KIB, MIB
+from tests.queue_events import put_events
 
 LEASE_S = 10.0
 FRAME_EVENTS = 3  # small frames, so that runs of a few dozen steps make many
@@ -151,7 +152,7 @@ class QueueAccounting(RuleBasedStateMachine):
         ]
         leased, before = self.leased(), list(self.queue)
         drops_before = self.store.stats().drops
-        result = self.store.put_many(events, classes)
+        result = put_events(self.store, events, classes)
         self.important.update(s for s, important in zip(seqs, classes, strict=True) if important)
         assert result.accepted + result.dropped == count
 

@@ -30,6 +30,7 @@ from phytrace_edge.queue.storage.recovery import connect
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.units import MIB
 from tests.processes import wait_for
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock, event, seqs
 
 
@@ -64,7 +65,7 @@ def test_warns_when_the_volume_is_smaller_than_the_cap(
 def test_put_claim_ack_round_trip_keeps_json_exact(open_store) -> None:
     store = open_store()
     events = [event(i, pad=i) for i in range(5)]
-    assert store.put_many(events).accepted == 5
+    assert put_events(store, events).accepted == 5
     batch = store.claim_batch(10, MIB)
     assert [orjson.loads(e.json) for e in batch.events] == events
     assert [e.event_id for e in batch.events] == [e["event_id"] for e in events]
@@ -76,7 +77,7 @@ def test_put_claim_ack_round_trip_keeps_json_exact(open_store) -> None:
 
 def test_claims_are_oldest_first_and_never_overlap(open_store) -> None:
     store = open_store()
-    store.put_many([event(i) for i in range(10)])
+    put_events(store, [event(i) for i in range(10)])
     first = store.claim_batch(4, MIB)
     second = store.claim_batch(4, MIB)
     assert seqs(first) == [0, 1, 2, 3] and seqs(second) == [4, 5, 6, 7]
@@ -87,7 +88,7 @@ def test_claims_are_oldest_first_and_never_overlap(open_store) -> None:
 
 def test_batch_byte_bound_but_always_one_event(open_store) -> None:
     store = open_store()
-    store.put_many([event(0, pad=5000), event(1, pad=10), event(2, pad=10)])
+    put_events(store, [event(0, pad=5000), event(1, pad=10), event(2, pad=10)])
     assert seqs(store.claim_batch(10, 100)) == [0]
     assert seqs(store.claim_batch(10, 200)) == [1]
 
@@ -96,7 +97,7 @@ def test_expired_lease_comes_back_to_another_sender(tmp_path: Path, clock: Clock
     path = tmp_path / "q.db"
     limits = QueueLimits(max_bytes=64 * MIB)
     crashed = QueueStore.open(path, limits=limits, clock=clock, lease_s=30)
-    crashed.put_many([event(i) for i in range(3)])
+    put_events(crashed, [event(i) for i in range(3)])
     assert seqs(crashed.claim_batch(10, MIB)) == [0, 1, 2]
     other = QueueStore.open(path, limits=limits, clock=clock, lease_s=30)
     assert other.claim_batch(10, MIB) is None
@@ -121,8 +122,8 @@ def test_renew_keeps_the_lease(open_store, clock: Clock) -> None:
 
 def test_event_cap_drop_oldest(open_store) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5))
-    store.put_many([event(i) for i in range(5)])
-    result = store.put_many([event(i) for i in range(5, 8)])
+    put_events(store, [event(i) for i in range(5)])
+    result = put_events(store, [event(i) for i in range(5, 8)])
     assert (result.accepted, result.dropped) == (3, 0)
     assert seqs(store.claim_batch(10, MIB)) == [3, 4, 5, 6, 7]
     assert store.stats().drops == {"cap_events": 3}
@@ -130,8 +131,8 @@ def test_event_cap_drop_oldest(open_store) -> None:
 
 def test_event_cap_drop_newest(open_store) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5, on_full="drop_newest"))
-    store.put_many([event(i) for i in range(4)])
-    result = store.put_many([event(i) for i in range(4, 8)])
+    put_events(store, [event(i) for i in range(4)])
+    result = put_events(store, [event(i) for i in range(4, 8)])
     assert (result.accepted, result.dropped) == (1, 3)
     assert seqs(store.claim_batch(10, MIB)) == [0, 1, 2, 3, 4]
     assert store.stats().drops == {"cap_events": 3}
@@ -139,9 +140,9 @@ def test_event_cap_drop_newest(open_store) -> None:
 
 def test_drop_oldest_spares_events_being_sent(open_store) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=4))
-    store.put_many([event(i) for i in range(4)])
+    put_events(store, [event(i) for i in range(4)])
     sending = store.claim_batch(2, MIB)
-    store.put_many([event(4), event(5)])
+    put_events(store, [event(4), event(5)])
     assert seqs(store.claim_batch(10, MIB)) == [4, 5]
     store.ack(sending)
     assert store.stats().drops == {"cap_events": 2}
@@ -152,7 +153,7 @@ def test_byte_cap_bounds_the_file(open_store, policy: str) -> None:
     cap = 2 * MIB
     store = open_store(limits=QueueLimits(max_bytes=cap, on_full=policy), compression="none")
     for start in range(0, 3000, 100):
-        result = store.put_many([event(i, pad=2000) for i in range(start, start + 100)])
+        result = put_events(store, [event(i, pad=2000) for i in range(start, start + 100)])
         assert store.file_bytes() <= cap + 64 * 1024  # the -shm index is not data
         if policy == "drop_oldest":
             assert result.dropped == 0  # room is made by dropping the oldest
@@ -165,10 +166,10 @@ def test_byte_cap_bounds_the_file(open_store, policy: str) -> None:
 
 def test_ttl_expires_old_events_but_not_leased_ones(open_store, clock: Clock) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, ttl_s=3600), lease_s=7200)
-    store.put_many([event(i) for i in range(3)])
+    put_events(store, [event(i) for i in range(3)])
     sending = store.claim_batch(1, MIB)
     clock.now += 1800
-    store.put_many([event(3)])
+    put_events(store, [event(3)])
     clock.now += 1801
     assert store.expire() == 2
     assert store.stats().drops == {"ttl": 2}
@@ -183,7 +184,7 @@ def test_ttl_expires_old_events_but_not_leased_ones(open_store, clock: Clock) ->
 @pytest.mark.parametrize("then", ["none", "gzip", "zstd"])
 def test_rows_stay_readable_when_compression_changes(open_store, first: str, then: str) -> None:
     store = open_store(compression=first)
-    store.put_many([event(i, pad=300) for i in range(3)])
+    put_events(store, [event(i, pad=300) for i in range(3)])
     codec = store._db.read("SELECT codec FROM events LIMIT 1")[0][0]
     assert codec == {"none": NONE, "gzip": GZIP, "zstd": ZSTD_DICT}[first]
     store.close()
@@ -198,7 +199,7 @@ def test_zstd_dictionary_shrinks_events_and_is_kept_in_the_database(open_store) 
     events: list[dict] = []
     run_simulation(100, sink=events.append)
     store = open_store()
-    store.put_many(events)
+    put_events(store, events)
     stats = store.stats()
     json_bytes = sum(len(orjson.dumps(e)) for e in events)
     assert stats.stored_bytes * 5 < json_bytes  # at least 5x smaller at rest
@@ -231,7 +232,7 @@ def test_rows_of_a_retired_dictionary_stay_readable(open_store) -> None:
 
 def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> None:
     store = open_store()
-    store.put_many([event(i) for i in range(4)])
+    put_events(store, [event(i) for i in range(4)])
     batch = store.claim_batch(4, MIB)
     poison = batch.events[2]
     store.ack(batch, [DeadLetter(poison.id, "rejected: 422", 422, '{"error": "bad field"}')])
@@ -263,10 +264,10 @@ def test_dead_letters_list_export_requeue_purge(open_store, clock: Clock) -> Non
 
 def test_requeue_into_a_full_queue_moves_what_fits_and_keeps_the_rest(open_store) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, max_events=5))
-    store.put_many([event(i) for i in range(3)])
+    put_events(store, [event(i) for i in range(3)])
     batch = store.claim_batch(3, MIB)
     store.ack(batch, [DeadLetter(e.id, "rejected: 422", 422) for e in batch.events])
-    store.put_many([event(i) for i in range(10, 13)])
+    put_events(store, [event(i) for i in range(10, 13)])
 
     assert store.dead_letters.requeue() == 2  # 3 queued + 2 = the cap of 5
     stats = store.stats()
@@ -296,7 +297,7 @@ def test_corrupt_file_is_moved_aside_and_a_fresh_queue_starts(
 
 def test_damaged_pages_fail_the_check_and_are_moved_aside(tmp_path: Path, open_store) -> None:
     store = open_store()
-    store.put_many([event(i, pad=3000) for i in range(200)])
+    put_events(store, [event(i, pad=3000) for i in range(200)])
     store.reclaim_space(force=True)
     store.close()
     path = tmp_path / "state" / "queue.db"
@@ -331,7 +332,7 @@ def test_damage_the_open_meets_past_its_check_is_moved_aside_at_once(
     tmp_path: Path, open_store, huge: None
 ) -> None:
     store = open_store()
-    store.put_many(noise_events(50))
+    put_events(store, noise_events(50))
     store.reclaim_space(force=True)
     store.close()
     path = tmp_path / "state" / "queue.db"
@@ -345,7 +346,7 @@ def test_damage_found_in_use_is_reported_then_moved_aside_at_the_next_open(
     tmp_path: Path, open_store, huge: None
 ) -> None:
     store = open_store()
-    store.put_many(noise_events(200))
+    put_events(store, noise_events(200))
     store.reclaim_space(force=True)
     store.close()
     path = tmp_path / "state" / "queue.db"
@@ -427,10 +428,10 @@ def test_disk_full_is_survived_counted_and_recovers(open_store) -> None:
     store = open_store(
         limits=QueueLimits(max_bytes=64 * MIB, on_full="drop_newest"), compression="none"
     )
-    store.put_many([event(i, pad=1000) for i in range(20)])
+    put_events(store, [event(i, pad=1000) for i in range(20)])
     pages = store._db.read("PRAGMA page_count")[0][0]
     store._db.read(f"PRAGMA max_page_count = {pages}")  # the "disk" is now full
-    result = store.put_many([event(i, pad=4000) for i in range(20, 30)])
+    result = put_events(store, [event(i, pad=4000) for i in range(20, 30)])
     assert (result.accepted, result.dropped) == (0, 10)
     assert store.stats().drops == {"disk_full": 10}
     assert store.stats().depth == 20
@@ -441,7 +442,7 @@ def test_disk_full_is_survived_counted_and_recovers(open_store) -> None:
 
 def test_disk_full_with_drop_oldest_evicts_to_keep_new_data(open_store) -> None:
     store = open_store(compression="none")
-    store.put_many([event(i, pad=3000) for i in range(40)])
+    put_events(store, [event(i, pad=3000) for i in range(40)])
     pages = store._db.read("PRAGMA page_count")[0][0]
     store._db.read(f"PRAGMA max_page_count = {pages}")
     assert store.put(event(100, pad=3000)).accepted == 1
@@ -479,7 +480,7 @@ def test_a_database_of_the_first_migration_is_upgraded(tmp_path: Path) -> None:
 def test_a_drained_backlog_gives_its_space_back(open_store) -> None:
     store = open_store(compression="none")
     for start in range(0, 6000, 500):
-        store.put_many([event(i, pad=2000) for i in range(start, start + 500)])
+        put_events(store, [event(i, pad=2000) for i in range(start, start + 500)])
     store.reclaim_space(force=True)
     peak = store.file_bytes()
     assert peak > 10 * MIB
@@ -497,7 +498,7 @@ def test_concurrent_put_and_claim_threads_lose_nothing(open_store) -> None:
 
     def produce() -> None:
         for start in range(0, 2000, 50):
-            store.put_many([event(i) for i in range(start, start + 50)])
+            put_events(store, [event(i) for i in range(start, start + 50)])
         done.set()
 
     def consume() -> None:
@@ -517,7 +518,7 @@ def test_concurrent_put_and_claim_threads_lose_nothing(open_store) -> None:
 
 def test_stats_are_readable_from_another_connection_during_a_write(open_store) -> None:
     store = open_store()
-    store.put_many([event(i) for i in range(10)])
+    put_events(store, [event(i) for i in range(10)])
     reader = sqlite3.connect(f"file:{store.path}?mode=ro", uri=True)
     with store._db.transaction() as cursor:
         cursor.execute("DELETE FROM events")  # uncommitted
@@ -543,7 +544,7 @@ def test_the_walk_over_unleased_rows(open_store, clock: Clock) -> None:
     from phytrace_edge.queue.storage.rows import delete_range
 
     store = open_store(frame_events=1)  # one row per event
-    store.put_many([event(i) for i in range(10)])
+    put_events(store, [event(i) for i in range(10)])
     claimed = store.claim_batch(3, 10**7)  # rows 1..3 leased
     assert claimed is not None and [e.id for e in claimed.events] == [1, 2, 3]
     now = clock()

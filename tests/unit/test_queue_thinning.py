@@ -17,6 +17,7 @@ from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.queue.records import QueuedEvent
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.units import MIB
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock, event
 
 HOUR = 3600.0
@@ -40,7 +41,7 @@ def outage(store, clock: Clock, hours: float, rate_hz: float, important_every: i
     per_second = max(1, round(rate_hz))
     for _ in range(int(hours * HOUR)):
         flags = [(n + i) % important_every == 0 for i in range(per_second)]
-        store.put_many([noisy(n + i) for i in range(per_second)], flags)
+        put_events(store, [noisy(n + i) for i in range(per_second)], flags)
         important.update(n + i for i, flag in enumerate(flags) if flag)
         n += per_second
         clock.now += 1.0

@@ -30,6 +30,7 @@ from phytrace_edge.queue.space.volume import (
 )
 from phytrace_edge.runtime.health import Thresholds, report
 from phytrace_edge.units import GIB, MIB
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import Clock, event
 
 LIMITS = Thresholds(
@@ -107,14 +108,14 @@ def test_a_removed_reserve_on_a_roomy_disk_is_made_again_at_once_and_drops_nothi
     open_store, caplog: pytest.LogCaptureFixture
 ) -> None:
     store = open_store(compression="none")
-    store.put_many([event(i, pad=500) for i in range(50)])
+    put_events(store, [event(i, pad=500) for i in range(50)])
     reserve = store._db.reserve
     size = reserve.path.stat().st_size
     reserve.path.unlink()  # `rm queue.db-reserve` by someone cleaning up
     store._caps.volume.forget()  # a second has passed since the last look
     with caplog.at_level(logging.INFO):
-        result = store.put_many([event(i, pad=500) for i in range(50, 100)])
-        store.put_many([event(i, pad=500) for i in range(100, 150)])
+        result = put_events(store, [event(i, pad=500) for i in range(50, 100)])
+        put_events(store, [event(i, pad=500) for i in range(100, 150)])
     assert (result.accepted, result.dropped) == (50, 0)
     assert reserve.path.stat().st_size == size, "made again by the put, not by maintenance"
     stats = store.stats()
@@ -143,7 +144,7 @@ def test_a_queue_whose_folder_is_gone_keeps_every_event_and_never_raises(
     open_store, clock: Clock, how: str
 ) -> None:
     store = open_store(compression="none")
-    store.put_many([event(i, pad=500) for i in range(100)])
+    put_events(store, [event(i, pad=500) for i in range(100)])
     folder = store.path.parent
     if how == "moved":
         folder.rename(folder.with_name("elsewhere"))
@@ -152,7 +153,7 @@ def test_a_queue_whose_folder_is_gone_keeps_every_event_and_never_raises(
     store._caps.volume.forget()
     for start in range(100, 400, 50):
         clock.now += 11.0  # old enough to seal: sealing must not look at a missing folder
-        result = store.put_many([event(i, pad=500) for i in range(start, start + 50)])
+        result = put_events(store, [event(i, pad=500) for i in range(start, start + 50)])
         assert (result.accepted, result.dropped) == (50, 0)
     assert not store._full_disk.has_room_to_seal()
     assert not store._full_disk.restore_reserve()
@@ -164,10 +165,10 @@ def test_a_queue_whose_folder_is_gone_keeps_every_event_and_never_raises(
 
 def test_a_write_that_fails_for_another_reason_evicts_nothing(open_store) -> None:
     store = open_store(limits=QueueLimits(max_bytes=64 * MIB, on_full="drop_oldest"))
-    store.put_many([event(i) for i in range(40)])
+    put_events(store, [event(i) for i in range(40)])
     store._db.execute("PRAGMA query_only = 1")  # SQLite now refuses writes: SQLITE_READONLY
     with pytest.raises(QueueError, match="read-only"):
-        store.put_many([event(i) for i in range(40, 50)])  # the writer keeps them, retries
+        put_events(store, [event(i) for i in range(40, 50)])  # the writer keeps them, retries
     store._db.execute("PRAGMA query_only = 0")
     stats = store.stats()
     assert stats.depth == 40 and stats.drops == {}, "a read-only queue is not a full disk"
@@ -198,7 +199,7 @@ def test_caps_follow_a_volume_smaller_than_the_setting(
     store = open_store(limits=QueueLimits(max_bytes=GIB, on_full=policy), frame_events=20)
     n = 0
     for _ in range(400):  # 400 s at 20 Hz of ~1 KB events: 8 MB, twice the volume
-        store.put_many([noisy(n + i) for i in range(20)])
+        put_events(store, [noisy(n + i) for i in range(20)])
         n += 20
         clock.now += 1.0
         store._caps.volume.forget()  # a second passed: look again

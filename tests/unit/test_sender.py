@@ -32,6 +32,7 @@ from phytrace_edge.ship.throttle import Throttle
 from phytrace_edge.ship.transport import FunctionTransport, HttpTransport
 from phytrace_edge.units import MIB
 from tests.processes import wait_for
+from tests.queue_events import put_events
 from tests.unit.queue_fixtures import NOW, Y2001, Machine, put_stamped
 
 
@@ -78,7 +79,7 @@ def store(tmp_path: Path):
 
 def put(store: QueueStore, count: int, start: int = 0, **extra) -> list[str]:
     events = [{"event_id": f"e{i:05d}", "seq": i, **extra} for i in range(start, start + count)]
-    store.put_many(events)
+    put_events(store, events)
     return [e["event_id"] for e in events]
 
 

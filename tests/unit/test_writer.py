@@ -12,12 +12,12 @@ from typing import Any
 
 import pytest
 
-from phytrace_edge.builder.builder import Built
 from phytrace_edge.errors import QueueError
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import writer as writer_module
 from phytrace_edge.runtime.health import accounting
 from phytrace_edge.runtime.writer import QueueWriter
+from phytrace_edge.udm.types import Built
 from tests.processes import wait_for
 
 
