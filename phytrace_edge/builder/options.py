@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from phytrace_edge.builder.defaults import (
     DEFAULT_ROSOUT_BURST,
@@ -12,7 +13,9 @@ from phytrace_edge.builder.defaults import (
 )
 from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY
 from phytrace_edge.ingest.topics import ExtraTopic
-from phytrace_edge.udm.types import UdmIdentity
+
+if TYPE_CHECKING:  # the types module costs every command's start: annotations only
+    from phytrace_edge.udm.types import UdmIdentity
 
 
 @dataclass(frozen=True)
@@ -25,7 +28,7 @@ class Identity:
     site_id: str | None = None
 
     def as_dict(self) -> UdmIdentity:
-        identity = UdmIdentity(source_id=self.source_id, source_type=self.source_type)
+        identity: UdmIdentity = {"source_id": self.source_id, "source_type": self.source_type}
         if self.fleet_id is not None:
             identity["fleet_id"] = self.fleet_id
         if self.site_id is not None:

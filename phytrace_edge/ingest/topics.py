@@ -17,11 +17,13 @@ Two flags say how a topic's messages are treated:
 """
 
 from collections.abc import Callable
-from typing import Any, Literal, NamedTuple, get_args
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, get_args
 
 from phytrace_edge.ingest import handlers, robot_status, rosout
 from phytrace_edge.ingest.readings import Reading
-from phytrace_edge.udm.types import TopicMode
+
+if TYPE_CHECKING:  # the types module costs every command's start: annotations only
+    from phytrace_edge.udm.types import TopicMode
 
 Domain = Literal[
     "location",
@@ -116,7 +118,7 @@ TOPICS: tuple[TopicSpec, ...] = (
 TOPIC_BY_NAME = {spec.name: spec for spec in TOPICS}
 TOPIC_NAMES = tuple(TOPIC_BY_NAME)
 
-EXTRA_MODES: tuple[TopicMode, ...] = get_args(TopicMode)
+EXTRA_MODES: "tuple[TopicMode, ...]" = ("sample", "on_change")  # udm.types.TopicMode
 
 
 class ExtraTopic(NamedTuple):
@@ -130,7 +132,7 @@ class ExtraTopic(NamedTuple):
     name: str
     type_name: str = ""
     rate_hz: float = 1.0
-    mode: TopicMode = "sample"
+    mode: "TopicMode" = "sample"
     deadband: float = 0.0
 
     def describe(self) -> str:

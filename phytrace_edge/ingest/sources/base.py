@@ -14,11 +14,13 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from phytrace_edge.ingest.defaults import DEFAULT_REPLAY_RATE
-from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.qos import QosChoice
+
+if TYPE_CHECKING:  # the dispatcher costs every command's start: annotations only
+    from phytrace_edge.ingest.dispatch import Take
 
 NODE_NAME = "phytrace_edge"
 
