@@ -6,8 +6,9 @@ from __future__ import annotations
 from typing import Any
 
 from phytrace_edge.builder.envelope import envelope
+from phytrace_edge.udm.event import format_timestamp, format_timestamp_us, new_event_id
 
-EVENT_TYPES = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health")
+EVENT_TYPES = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health", "incident")
 
 
 def udm_event(event_type: str, identity: dict[str, str], at_s: float, n: int) -> dict[str, Any]:
@@ -31,6 +32,22 @@ def udm_event(event_type: str, identity: dict[str, str], at_s: float, n: int) ->
             "message": f"slow loop {n}",
             "clock": "epoch",
         }
+    elif event_type == "incident":
+        at = format_timestamp(at_s)
+        body = {
+            "incident": {
+                "id": new_event_id(int(at_s * 1000)),
+                "part": 1,
+                "parts": 1,
+                "trigger": {"kind": "manual", "message": f"mark {n}", "at": at},
+                "window": {"start": at, "end": at},
+                "samples": {
+                    "/odom": [
+                        {"t": format_timestamp_us(at_s), "linear_velocity": {"x_mps": n / 10}}
+                    ]
+                },
+            }
+        }
     else:
         body = {
             "trigger": "interval",
@@ -46,7 +63,7 @@ def udm_event(event_type: str, identity: dict[str, str], at_s: float, n: int) ->
 def every_type(
     count: int, identity: dict[str, str], start_s: float, step_s: float = 0.2
 ) -> list[dict[str, Any]]:
-    """``count`` events, the four types in turn, ``step_s`` apart."""
+    """``count`` events, the five types in turn, ``step_s`` apart."""
     return [
         udm_event(EVENT_TYPES[i % len(EVENT_TYPES)], identity, start_s + i * step_s, i)
         for i in range(count)

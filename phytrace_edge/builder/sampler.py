@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -54,8 +54,12 @@ class Sampler:
         rate_hz: float,
         tick_input: TickInput[Any] | None = None,
         monotonic: Callable[[], float] = time.monotonic,
+        incidents: Callable[[], Sequence[Built]] = tuple,
     ) -> None:
+        """``incidents`` gives the incidents whose window ended (the recorder's
+        ``take_closed``): emitted at the tick, after the side events."""
         self.builder = builder
+        self._incidents = incidents
         self.period_s = 1.0 / rate_hz
         self._emit = emit
         self._input = tick_input
@@ -79,9 +83,12 @@ class Sampler:
         return True
 
     def flush_side_events(self, captured_at_s: float | None = None) -> None:
-        """Emit the log records and extra-topic events that came in (also at a stop)."""
+        """Emit the log records and extra-topic events that came in, and the incidents
+        that closed (also at a stop)."""
         for side in self.builder.side_events(captured_at_s):
             self._emit(side)
+        for part in self._incidents():
+            self._emit(part)
 
     def run(self, stop: threading.Event, beat: Callable[[], None] = lambda: None) -> None:
         """Tick every period until ``stop``. Ticks are scheduled on the monotonic clock

@@ -34,6 +34,7 @@ COMMANDS = {
         "stub",
         "export",
         "inspect",
+        "mark",
     )
 } | {"import": "phytrace_edge.cli.import_files"}  # `import` is a Python keyword
 DESCRIPTION = "PhyTrace edge bridge: ROS 2 topics -> UDM events -> queue -> PhyCloud."

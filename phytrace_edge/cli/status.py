@@ -10,6 +10,7 @@ from typing import Any, cast
 from phytrace_edge.cli.common import error, print_json
 from phytrace_edge.config import LoadedSettings
 from phytrace_edge.errors import EXIT_NOT_RUNNING, QueueError
+from phytrace_edge.incident.figures import IncidentFigures
 from phytrace_edge.queue.peek import QueueStats, read_stats
 from phytrace_edge.runtime import live_status
 from phytrace_edge.runtime.health import Live, Thresholds, exit_code, report, thresholds
@@ -140,6 +141,8 @@ def render_status(d: StatusReport) -> str:
         f"  dead letters {d['dead_letters']}"
         + ("  (phytrace-edge dead-letters list)" if d["dead_letters"] else "")
     )
+    if (incidents := render_incidents(d["incidents"])) is not None:
+        lines.append(f"  incidents    {incidents}")
     for topic, t in d["topics"].items():
         age = t.get("last_seen_age_s")
         seen = "" if age is None else f", last {age:.1f} s ago"
@@ -166,6 +169,31 @@ def render_status(d: StatusReport) -> str:
     lines += [f"  warning: {warning}" for warning in d["warnings"]]
     lines += [f"  problem: {problem}" for problem in d["problems"]]
     return "\n".join(lines)
+
+
+def render_incidents(figures: IncidentFigures) -> str | None:
+    """This run's incidents in one line; None when no service ran."""
+    if not figures:
+        return None
+    if not figures.get("enabled"):
+        return "recording off (INCIDENT_RECORDING)"
+    line = (
+        f"{figures.get('recorded', 0)} recorded ({figures.get('parts', 0)} part(s), "
+        f"{figures.get('parts_sent', 0)} sent)"
+        + (", recording now" if figures.get("recording") else "")
+        + f"; window {format_bytes(figures.get('buffer_bytes', 0))} of "
+        + f"{format_bytes(figures.get('buffer_max_bytes', 0))}"
+    )
+    lost = [
+        f"{figures.get(key, 0)} {what}"
+        for key, what in (
+            ("rate_limited", "trigger(s) rate-limited"),
+            ("samples_dropped", "sample(s) pushed out of the window"),
+            ("parts_dead_lettered", "part(s) refused by PhyCloud"),
+        )
+        if figures.get(key, 0)
+    ]
+    return line + ("; " + ", ".join(lost) if lost else "")
 
 
 def render_link(link: LinkSection) -> str | None:

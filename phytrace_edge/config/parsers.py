@@ -333,6 +333,16 @@ def topic_set(raw: Any) -> frozenset[str]:
     return frozenset(topics)
 
 
+def topic_names(raw: Any) -> tuple[str, ...]:
+    """Topic names separated by commas (the table's or TOPICS_EXTRA's: checked where
+    both are known), in order, without repeats."""
+    allowed = "topic names separated by commas, like /odom,/imu/data"
+    topics = _topic_list(raw, allowed)
+    if len(topics) > 64 or any(not _matches(_NAMESPACE, topic) for topic in topics):
+        raise ValueError(allowed)
+    return tuple(dict.fromkeys(topics))
+
+
 def secret(raw: Any) -> Secret:
     """The API key: printable ASCII without spaces (a header value that cannot break
     the request, or leak through an error about a malformed header)."""

@@ -25,6 +25,7 @@ from phytrace_edge.builder.defaults import (
     ROSOUT_LEVELS,
 )
 from phytrace_edge.config.extra_topics import topics_extra
+from phytrace_edge.config.incident_triggers import incident_triggers
 from phytrace_edge.config.parsers import (
     boolean,
     bridge_input,
@@ -43,10 +44,12 @@ from phytrace_edge.config.parsers import (
     positive_float,
     proxy_url,
     secret,
+    topic_names,
     topic_qos,
     topic_remap,
     topic_set,
 )
+from phytrace_edge.incident import defaults as incident
 from phytrace_edge.ingest.defaults import DEFAULT_EXTRA_MAX_ARRAY, DEFAULT_REPLAY_RATE
 from phytrace_edge.ingest.qos import QosChoice
 from phytrace_edge.queue import defaults as queue
@@ -55,6 +58,7 @@ from phytrace_edge.ship import defaults as ship
 from phytrace_edge.units import KIB, MIB
 
 if TYPE_CHECKING:  # the topic table: imported when a topic setting is given
+    from phytrace_edge.incident.triggers import Condition
     from phytrace_edge.ingest.topics import ExtraTopic
 
 SOURCE_TYPES = ("delivery_robot", "amr", "agv", "drone", "humanoid", "arm")
@@ -237,6 +241,48 @@ class Settings:
         DEFAULT_ROSOUT_BURST,
         int_between(1, 100_000),
         "/rosout records per logger per minute; the rest are counted",
+    )
+    incident_recording: bool = setting(
+        True, boolean, "keep the incident topics' last seconds and record incidents"
+    )
+    incident_topics: tuple[str, ...] = setting(
+        incident.DEFAULT_INCIDENT_TOPICS,
+        topic_names,
+        "topics kept at full rate for incidents (the table's or TOPICS_EXTRA's)",
+    )
+    incident_before_s: float = setting(
+        incident.DEFAULT_INCIDENT_BEFORE_S, positive_float(600), "an incident's seconds before"
+    )
+    incident_after_s: float = setting(
+        incident.DEFAULT_INCIDENT_AFTER_S, positive_float(600), "an incident's seconds after"
+    )
+    incident_buffer_max_bytes: int = setting(
+        incident.DEFAULT_INCIDENT_BUFFER_MAX_BYTES,
+        byte_size(64 * KIB, 4 * 1024 * MIB),
+        "memory bound of the incident window; beyond it the oldest samples go, counted",
+    )
+    incident_diagnostics_level: str = setting(
+        incident.DEFAULT_INCIDENT_DIAGNOSTICS_LEVEL,
+        one_of("warn", "error", "stale", "off"),
+        "a /diagnostics status entering this level opens an incident",
+    )
+    incident_rosout_level: str = setting(
+        incident.DEFAULT_INCIDENT_ROSOUT_LEVEL,
+        one_of("error", "fatal", "off"),
+        "a /rosout record at this level opens an incident",
+    )
+    incident_triggers: tuple[Condition, ...] = setting(
+        (), incident_triggers, "topic conditions that open an incident: '/estop data == true'"
+    )
+    incident_max_per_hour: int = setting(
+        incident.DEFAULT_INCIDENT_MAX_PER_HOUR,
+        int_between(1, 3600),
+        "incidents opened per hour at most; more triggers are counted",
+    )
+    incident_max_s: float = setting(
+        incident.DEFAULT_INCIDENT_MAX_S,
+        positive_float(3600),
+        "later triggers extend a window at most this far past its first",
     )
     health_event_interval_s: float = setting(
         DEFAULT_HEALTH_EVENT_INTERVAL_S,

@@ -19,7 +19,7 @@ import orjson
 from phytrace_edge.errors import QueueError, QueueFullError
 from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, Sealer
-from phytrace_edge.queue.records import PutResult
+from phytrace_edge.queue.records import INCIDENT_CLASS, PutResult
 from phytrace_edge.queue.space.caps import Caps, wal_reserve
 from phytrace_edge.queue.space.full_disk import FullDisk
 from phytrace_edge.queue.storage.database import Database, bump_counters
@@ -28,6 +28,14 @@ from phytrace_edge.queue.timekeeping.repair import ClockKeeper
 from phytrace_edge.udm.types import Built, UdmEvent
 
 log = logging.getLogger(__name__)
+
+
+def row_class(event: UdmEvent, important: bool) -> int:
+    """The class a row is stored with: 0 periodic, 1 important, ``INCIDENT_CLASS`` an
+    incident's part (important, and sent before the rest of a backlog)."""
+    if event.get("event_type") == "incident":
+        return INCIDENT_CLASS
+    return int(important)
 
 
 class Appender:
@@ -101,7 +109,7 @@ class Appender:
         at_rest = self._codecs.encode(raw)
         return NewRow(
             event_id=str(event.get("event_id", "")),
-            important=int(important),
+            important=row_class(event, important),
             queued_at=now,
             codec=at_rest.codec,
             dict_id=at_rest.dict_id,

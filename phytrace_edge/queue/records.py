@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+# an incident's part, in the ``important`` column (migrations/0007_incidents.sql)
+INCIDENT_CLASS = 2
+
 
 @dataclass(frozen=True)
 class QueuedEvent:

@@ -194,6 +194,7 @@ def report(
         "unexpected_answers": sender.get("unexpected_answers", 0),
         "queue_errors": sender.get("queue_errors", 0),
         "events_built": service.get("events_built", 0),
+        "incidents": service.get("incidents", {}),
         "thread_restarts": {name: s.get("restarts", 0) for name, s in stages.items()},
         "stages": stages,
         "topics": _topics_now(service.get("topics", {}), heartbeat_age, running),

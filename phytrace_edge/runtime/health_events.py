@@ -81,6 +81,15 @@ def health_event(
             topic: _topic(figures) for topic, figures in list(report["topics"].items())[:TOPICS_MAX]
         },
     }
+    incidents = report.get("incidents", {})
+    if incidents.get("enabled"):
+        event["incidents"] = {
+            "recorded": incidents.get("recorded", 0),
+            "parts": incidents.get("parts", 0),
+            "parts_sent": incidents.get("parts_sent", 0),
+            "rate_limited": incidents.get("rate_limited", 0),
+            "samples_dropped": incidents.get("samples_dropped", 0),
+        }
     last_error_class = report.get("last_error_class")
     if last_error_class:
         event["last_error_class"] = last_error_class

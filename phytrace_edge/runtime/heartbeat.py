@@ -13,6 +13,7 @@ from typing import Any, NamedTuple, cast
 
 from phytrace_edge._version import __version__
 from phytrace_edge.errors import QueueError
+from phytrace_edge.incident.figures import IncidentFigures
 from phytrace_edge.queue.peek import QueueStats
 from phytrace_edge.queue.store import QueueStore
 from phytrace_edge.runtime import live_status
@@ -118,6 +119,7 @@ def service_document(
     events_built: int,
     started_at: float,
     moment: Moment,
+    incidents: IncidentFigures,
 ) -> ServiceDocument:
     """What the heartbeat row and the live status file hold (``status`` reads them)."""
     return {
@@ -133,6 +135,7 @@ def service_document(
         "topics": topics,
         "stages": stages,
         "events_built": events_built,
+        "incidents": incidents,
     }
 
 
@@ -223,7 +226,17 @@ class Heartbeat:
             self.writer.events_handed,
             self.started_at,
             self.moment(running),
+            self.incidents(),
         )
+
+    def incidents(self) -> IncidentFigures:
+        """The recorder's figures and the incident parts PhyCloud answered for."""
+        stats = self.sender.stats
+        return {
+            **self.pipeline.recorder.figures(),
+            "parts_sent": stats.incident_parts_sent,
+            "parts_dead_lettered": stats.incident_parts_dead_lettered,
+        }
 
     def moment(self, running: bool) -> Moment:
         """The queue's counters and the ledger of one moment: now, or, when the queue

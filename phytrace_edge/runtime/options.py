@@ -18,11 +18,13 @@ from urllib.parse import urlsplit
 from phytrace_edge.builder.options import BuilderOptions, Identity
 from phytrace_edge.config import Settings, setting_infos
 from phytrace_edge.errors import ConfigError
+from phytrace_edge.incident.options import IncidentOptions
 from phytrace_edge.ingest.sources.base import SourceOptions
 from phytrace_edge.ingest.sources.dds_env import domain_settings
+from phytrace_edge.ingest.topics import TOPIC_NAMES
 from phytrace_edge.queue.options import QueueLimits
 from phytrace_edge.redact import redact_url
-from phytrace_edge.runtime import health
+from phytrace_edge.runtime import health, marks
 from phytrace_edge.runtime.health import Thresholds
 from phytrace_edge.runtime.logs import configure_logging as configure_logs
 from phytrace_edge.ship.api_key import CREDENTIAL_NAME, ApiKey, readable_by_others
@@ -51,6 +53,8 @@ class ServiceOptions:
     health_event_interval_s: float = 0.0  # 0: no bridge.health events
     thresholds: Thresholds | None = None  # what the health events judge by
     link: Mapping[str, Any] = field(default_factory=dict)  # HttpTransport.figures()
+    marks_dir: Path | None = None  # where ``phytrace-edge mark`` leaves marks (runtime/marks.py)
+    incident_before_s: float = 30.0  # a mark older than this is past the window
 
 
 @dataclass(frozen=True)
@@ -87,12 +91,52 @@ def builder_options(s: Settings) -> BuilderOptions:
     )
 
 
+def incident_options(s: Settings) -> IncidentOptions:
+    """The INCIDENT_* settings. A window topic or trigger condition must be a topic the
+    bridge hears: the table's (a disabled one is left out of the window) or
+    TOPICS_EXTRA's."""
+    extra = {topic.name for topic in s.topics_extra}
+    unknown = [
+        topic
+        for topic in (*s.incident_topics, *(c.topic for c in s.incident_triggers))
+        if topic not in extra and topic not in TOPIC_NAMES
+    ]
+    if unknown:
+        raise ConfigError(
+            f"INCIDENT_TOPICS/INCIDENT_TRIGGERS name {', '.join(unknown)}: not a topic of "
+            "the table, nor of TOPICS_EXTRA (add it there to hear it)"
+        )
+    heard = set(s.topics) | extra
+    return IncidentOptions(
+        enabled=s.incident_recording,
+        topics=tuple(topic for topic in s.incident_topics if topic in heard),
+        before_s=s.incident_before_s,
+        after_s=s.incident_after_s,
+        buffer_max_bytes=s.incident_buffer_max_bytes,
+        max_per_hour=s.incident_max_per_hour,
+        max_s=s.incident_max_s,
+        diagnostics_level=_unless_off(s.incident_diagnostics_level),
+        rosout_level=_unless_off(s.incident_rosout_level),
+        conditions=s.incident_triggers,
+    )
+
+
+def _unless_off(level: str) -> str | None:
+    return None if level == "off" else level
+
+
 def source_options(
     s: Settings, env: Mapping[str, str], ros_args: Sequence[str] = (), **simulator: Any
 ) -> SourceOptions:
     """BRIDGE_INPUT and the topic settings; ``env`` is read for ROS 2's DDS variables."""
     kind, _, bag_path = s.bridge_input.partition(":")
     domain_id, localhost_only = 0, False
+    recorded = incident_options(s)
+    every_message = (
+        frozenset(recorded.topics) | {c.topic for c in recorded.conditions}
+        if recorded.enabled
+        else frozenset()
+    )
     if kind == "dds":
         domain_id, localhost_only = domain_settings(env)
     return SourceOptions(
@@ -102,6 +146,7 @@ def source_options(
             extra.name: (s.extra_topics[extra.name], extra.type_name) for extra in s.topics_extra
         },
         qos_overrides=s.topic_qos or {},
+        every_message=every_message,
         bag_path=bag_path,
         replay_rate=s.replay_rate,
         ros_args=tuple(ros_args),
@@ -235,4 +280,6 @@ def service_options(s: Settings) -> ServiceOptions:
         if s.bridge_input.startswith("bag:")
         else (s.health_event_interval_s),
         thresholds=health.thresholds(s),
+        marks_dir=marks.marks_dir(queue_path(s)),
+        incident_before_s=s.incident_before_s,
     )

@@ -13,13 +13,16 @@ time (a bag on its timeline, the simulator in virtual time) ticks from its loop.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
+from phytrace_edge.incident.recorder import IncidentRecorder
 from phytrace_edge.ingest.dispatch import Dispatcher
 from phytrace_edge.ingest.sources.base import Feed, Source
 from phytrace_edge.runtime.supervisor import Beat
+from phytrace_edge.udm.types import Built
 
 
 @dataclass(frozen=True)
@@ -30,6 +33,8 @@ class Pipeline:
     dispatcher: Dispatcher
     builder: UDMBuilder
     sampler: Sampler
+    recorder: IncidentRecorder
+    emit: Callable[[Built], None]
 
     @property
     def ticks_itself(self) -> bool:
@@ -57,6 +62,9 @@ class Pipeline:
         self.sampler.run(stop, beat)
 
     def close(self) -> None:
-        """Close the input, then emit the side events it left (a stop loses none)."""
+        """Close the input, then emit the side events it left (a stop loses none) and
+        the incident being recorded, cut short."""
         self.source.stop()
         self.sampler.flush_side_events()
+        for part in self.recorder.close_now():
+            self.emit(part)

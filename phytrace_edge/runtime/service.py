@@ -14,13 +14,14 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from phytrace_edge._version import __version__
 from phytrace_edge.errors import QueueError
 from phytrace_edge.host_memory import give_back_free_memory
 from phytrace_edge.ingest.sources.base import Finished
 from phytrace_edge.queue.store import QueueStore
+from phytrace_edge.runtime import marks
 from phytrace_edge.runtime.health import stalled
 from phytrace_edge.runtime.health_events import HealthEvents
 from phytrace_edge.runtime.heartbeat import HEARTBEAT_S, Heartbeat
@@ -99,6 +100,8 @@ class BridgeService:
         start(Worker("sender", self.sender.run, self.sender.stop))
         start(Worker("heartbeat", self._heartbeat_loop))
         start(Worker("maintenance", self._maintenance_loop))
+        if self.options.marks_dir is not None:
+            start(Worker("marks", self._marks_loop))
         start(Worker("ingest", self._ingest_loop, finite=True))
         if self.pipeline.ticks_itself:
             start(Worker("sampler", self.pipeline.tick))
@@ -144,6 +147,28 @@ class BridgeService:
             self.health_events.emit_if_due(stats, self.store.now(), live=document)
         except QueueError as exc:
             self._queue_trouble.report(f"no health event: {exc}")
+
+    def _marks_loop(self, stop: threading.Event, beat: Beat) -> None:
+        """Take the marks ``phytrace-edge mark`` leaves (runtime/marks.py)."""
+        folder = self.options.marks_dir
+        assert folder is not None
+        while not stop.wait(marks.POLL_S):
+            beat()
+            for request in marks.pending_marks(folder):
+                marks.answer(request, self._take_mark(request))
+
+    def _take_mark(self, request: marks.MarkRequest) -> dict[str, Any]:
+        """A mark as an incident's trigger, at the moment it was made; its answer."""
+        age_s = time.time() - request.at_wall_s
+        if age_s > self.options.incident_before_s:
+            return {
+                "outcome": "too_old",
+                "detail": f"made {age_s:.0f} s ago, before the window (INCIDENT_BEFORE_S "
+                f"{self.options.incident_before_s:g} s): no bridge ran to take it then",
+            }
+        marked = self.pipeline.recorder.mark(request.reason, request.at_wall_s)
+        log.warning("incident marked by hand (%s): %s", marked.outcome, request.reason)
+        return {"outcome": marked.outcome, "incident_id": marked.incident_id}
 
     def _maintenance_loop(self, stop: threading.Event, beat: Beat) -> None:
         due = time.monotonic() + MAINTENANCE_EVERY_S

@@ -12,6 +12,8 @@ every key name to these declarations.
 # annotation at import, a millisecond on the start-up path of `status`.
 from typing import Any, TypedDict
 
+from phytrace_edge.incident.figures import IncidentFigures
+
 
 class SenderFigures(TypedDict, total=False):
     """``SendStats.as_dict()`` and the send rate."""
@@ -102,6 +104,7 @@ class ServiceDocument(TypedDict, total=False):
     topics: dict[str, dict[str, Any]]
     stages: dict[str, StageFigures]
     events_built: int
+    incidents: IncidentFigures
     writer: WriterFigures
     ledger: LedgerFigures
     queue_file: QueueFileFigures
@@ -198,6 +201,7 @@ class StatusReport(TypedDict):
     unexpected_answers: int  # 2xx not PhyCloud's answer, or not accounting for the batch
     queue_errors: int
     events_built: int
+    incidents: IncidentFigures  # this run's (empty when no service ran)
     thread_restarts: dict[str, int]
     stages: dict[str, StageFigures]
     topics: dict[str, dict[str, Any]]

@@ -11,7 +11,7 @@ The dependency rule of the package (checked by ``tests/unit/test_architecture.py
 each component importing only those to its right::
 
     cli -> runtime -> config -> ship -> queue
-                             -> builder -> ingest -> sim
+                             -> incident -> builder -> ingest -> sim
     cli -> handcarry -> queue
     everything -> udm, units, redact, errors, _version, host_clock, host_memory, durable
 
@@ -28,14 +28,18 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from phytrace_edge import host_clock
-from phytrace_edge.builder.builder import UDMBuilder
+from phytrace_edge.builder.builder import SystemClock, UDMBuilder
 from phytrace_edge.builder.sampler import Sampler, TickInput
 from phytrace_edge.config import Settings
 from phytrace_edge.errors import QueueError
 from phytrace_edge.host_memory import give_back_free_memory
+from phytrace_edge.incident.recorder import IncidentRecorder
 from phytrace_edge.ingest.dispatch import Dispatcher
+from phytrace_edge.ingest.generic import message_data
+from phytrace_edge.ingest.readings import Reading
 from phytrace_edge.ingest.sources.base import Source
 from phytrace_edge.ingest.sources.registry import create_source
 from phytrace_edge.queue.defaults import OnFull
@@ -70,13 +74,26 @@ def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -
     dispatcher, then builds: one way, the source calling nothing back."""
     # a bag's events carry bag time: only this machine's clock can be unsynchronized
     unsynchronized = None if source.keeps_time else host_clock.unsynchronized
-    builder = UDMBuilder(
-        options.builder_options(s), source.clock, source.field_types, unsynchronized
+    clock = source.clock or SystemClock()  # one timeline for events and incidents
+    builder = UDMBuilder(options.builder_options(s), clock, source.field_types, unsynchronized)
+    recorder = IncidentRecorder(
+        options.incident_options(s), builder.identity, s.batch_max_bytes, clock
     )
-    dispatcher = Dispatcher(builder.add_reading, builder.add_message)
+
+    def on_reading(topic: str, reading: Reading, age_s: float) -> None:
+        builder.add_reading(topic, reading, age_s)
+        recorder.observe(topic, reading, age_s)
+
+    def on_other(topic: str, msg: Any, age_s: float) -> None:  # a TOPICS_EXTRA topic
+        builder.add_message(topic, msg, age_s)
+        if topic in recorder.watched:
+            data = message_data(msg, source.field_types, s.extra_max_array)
+            recorder.observe(topic, data, age_s)
+
+    dispatcher = Dispatcher(on_reading, on_other)
     tick_input = TickInput(source.before_tick, dispatcher.on_taken)
-    sampler = Sampler(builder, emit, s.sample_rate_hz, tick_input)
-    return Pipeline(source, dispatcher, builder, sampler)
+    sampler = Sampler(builder, emit, s.sample_rate_hz, tick_input, incidents=recorder.take_closed)
+    return Pipeline(source, dispatcher, builder, sampler, recorder, emit)
 
 
 def simulation_pipeline(

@@ -58,6 +58,7 @@ from phytrace_edge.ship.transport import (
     events_body,
     request_headers,
 )
+from phytrace_edge.udm.event import is_event_type
 
 log = logging.getLogger(__name__)
 
@@ -264,6 +265,10 @@ class Sender:
         self.store.ack(batch, dead)
         newest = max(event.queued_at for event in batch.events)
         self.stats.delivered(prepared.lane, len(batch.events), newest)
+        refused = {letter.queue_id for letter in dead}
+        incidents = [e.id in refused for e in batch.events if is_event_type(e.json, "incident")]
+        if incidents:
+            self.stats.incident_parts(incidents.count(False), incidents.count(True))
         if dead:
             self.stats.add_dead_lettered(len(dead))
             log.error(

@@ -36,6 +36,8 @@ class SendStats:
     last_refusal_at: float | None = None
     live_events_sent: int = 0  # the live lane's: the newest first, after an outage
     backfill_events_sent: int = 0
+    incident_parts_sent: int = 0  # ``incident`` events PhyCloud accepted
+    incident_parts_dead_lettered: int = 0
     newest_delivered_at: float | None = None  # when the newest event PhyCloud has was queued
     queue_errors: int = 0
     last_queue_error: str | None = None
@@ -74,6 +76,12 @@ class SendStats:
         """Count events PhyCloud refused for good, moved to dead letters."""
         with self.lock:
             self.dead_lettered += events
+
+    def incident_parts(self, sent: int, dead_lettered: int) -> None:
+        """Count the ``incident`` events of a batch PhyCloud answered."""
+        with self.lock:
+            self.incident_parts_sent += sent
+            self.incident_parts_dead_lettered += dead_lettered
 
     def count_split(self) -> None:
         """Count a batch split in two or more parts (refused, too large, unaccounted)."""

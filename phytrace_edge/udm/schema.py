@@ -22,7 +22,7 @@ from typing import Any
 
 import fastjsonschema
 
-SCHEMA_VERSION = "1.2.0"
+SCHEMA_VERSION = "1.3.0"
 SCHEMA_FILE = f"udm-{SCHEMA_VERSION}.schema.json"
 
 log = logging.getLogger(__name__)

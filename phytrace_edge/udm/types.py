@@ -1,5 +1,5 @@
 """The UDM event as a type: one TypedDict per event type, the shape the JSON Schema
-(``udm-1.2.0.schema.json``) gives it, so that mypy follows the event from the builder
+(``udm-1.3.0.schema.json``) gives it, so that mypy follows the event from the builder
 to the queue (docs/udm.md has the field-by-field table).
 
 An event stays a plain dict at run time: the queue encodes it with orjson as it is,
@@ -138,9 +138,59 @@ class HealthEvent(_HealthFields, total=False):
     last_error_class: str
     thread_restarts: dict[str, int]
     topics: dict[str, dict[str, Any]]
+    incidents: dict[str, int]
 
 
-UdmEvent = PeriodicEvent | TopicEvent | LogRecordEvent | HealthEvent
+class _IncidentTriggerFields(TypedDict):
+    kind: Literal["diagnostics", "rosout", "topic", "manual"]
+    message: str
+    at: str
+
+
+class IncidentTrigger(_IncidentTriggerFields, total=False):
+    """What opened the incident (the first trigger; later ones only extended it)."""
+
+    topic: str
+    level: str
+
+
+class IncidentWindow(TypedDict):
+    """The window's first and last moment: INCIDENT_BEFORE_S before the trigger to
+    INCIDENT_AFTER_S after the last trigger that extended it."""
+
+    start: str
+    end: str
+
+
+class _IncidentFields(TypedDict):
+    id: str
+    part: int
+    parts: int
+    trigger: IncidentTrigger
+    window: IncidentWindow
+    samples: dict[str, list[dict[str, Any]]]
+
+
+class Incident(_IncidentFields, total=False):
+    """One part of an incident: the samples of the window topics in a slice of the
+    window, keyed by topic, each ``{"t": ..., **reading}`` in time order."""
+
+    triggers: int
+    dropped: dict[str, int]
+    cut_short: bool
+
+
+class _IncidentEventFields(Envelope):
+    incident: Incident
+
+
+class IncidentEvent(_IncidentEventFields, total=False):
+    """``incident``: full-rate data around a trigger, in parts (UDM 1.3.0)."""
+
+    wall_clock: WallClock
+
+
+UdmEvent = PeriodicEvent | TopicEvent | LogRecordEvent | HealthEvent | IncidentEvent
 
 
 class Built(NamedTuple):

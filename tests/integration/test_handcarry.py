@@ -187,7 +187,8 @@ def test_an_out_file_that_exists_or_has_no_folder_is_a_bad_argument(tmp_path: Pa
 
 def test_inspect_says_whole_damaged_or_not_an_export_by_its_exit_code(tmp_path: Path) -> None:
     queue = tmp_path / "robot.db"
-    fill_robot_queue(queue, 40)
+    count = 10 * len(EVENT_TYPES)
+    fill_robot_queue(queue, count)
     stick = tmp_path / "stick.mcap"
     assert run_cli("export", "--out", str(stick), **robot(queue)).returncode == 0
     cut = tmp_path / "cut.mcap"
@@ -198,21 +199,21 @@ def test_inspect_says_whole_damaged_or_not_an_export_by_its_exit_code(tmp_path: 
     whole = run_cli("inspect", "--json", str(stick))
     assert whole.returncode == 0, whole.stderr
     report = json.loads(whole.stdout)
-    assert report["whole"] and report["events"] == 40 and report["damage"] is None
+    assert report["whole"] and report["events"] == count and report["damage"] is None
     assert report["per_type"] == dict.fromkeys(EVENT_TYPES, 10)
     assert report["manifest"]["source_id"] == IDENTITY["source_id"]
     damaged = run_cli("inspect", str(stick), str(cut))
     assert damaged.returncode == 1
     whole, where, verdict = verdicts(damaged.stdout)
-    assert whole == "whole: an import delivers all 40 event(s)"
+    assert whole == f"whole: an import delivers all {count} event(s)"
     cut_at = re.fullmatch(
         r"  damaged      byte (\d+): the file ends inside this record \(truncated\)", where
     )
     assert cut_at and 0 < int(cut_at[1]) < len(cut.read_bytes()), where
-    assert verdict == "damaged: an import delivers the 40 event(s) before the damage"
+    assert verdict == f"damaged: an import delivers the {count} event(s) before the damage"
     foreign = run_cli("inspect", str(stick), str(notes))
     assert foreign.returncode == 2
-    assert verdicts(foreign.stdout) == ["whole: an import delivers all 40 event(s)"]
+    assert verdicts(foreign.stdout) == [f"whole: an import delivers all {count} event(s)"]
     assert foreign.stderr == (
         f"phytrace-edge: error: {notes}: byte 0: "
         "not a phytrace-edge export (neither MCAP nor .phx)\n"

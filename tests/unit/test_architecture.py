@@ -27,10 +27,11 @@ DECLARED: dict[str, set[str]] = {
     "package": {"cli", "runtime"},  # phytrace_edge/__init__.py and __main__.py
     "cli": {"runtime", "stub", "sim", "handcarry"},
     "runtime": {"config"},
-    "config": {"ship", "builder"},
+    "config": {"ship", "builder", "incident"},
     "ship": {"queue"},
     "queue": set(),
     "handcarry": {"queue"},
+    "incident": {"builder"},
     "builder": {"ingest"},
     "ingest": {"sim"},
     "sim": set(),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import cast, get_type_hints
 
+from phytrace_edge.incident.figures import IncidentFigures
 from phytrace_edge.queue.peek import QueueStats, ServiceState
 from phytrace_edge.runtime.health import Live, Thresholds, accounting, exit_code, report
 from phytrace_edge.runtime.heartbeat import Moment, service_document
@@ -147,9 +148,11 @@ def test_the_heartbeat_writes_only_declared_keys() -> None:
     options = ServiceOptions("sim", "bot", "amr", "127.0.0.1:9", 5.0, 5.0)
     ledger = {"built": 7, "written": 7, "in_memory": 0, "dropped": {}}
     moment = Moment(ledger, WRITER_OK, {"state": "ok"}, {"queued_total": 7}, {}, NOW, True, 1.0)
-    document = service_document(options, {"events_sent": 3}, {}, {}, 7, NOW, moment)
+    incidents: IncidentFigures = {"enabled": True, "recorded": 1}
+    document = service_document(options, {"events_sent": 3}, {}, {}, 7, NOW, moment, incidents)
     assert set(document) == set(get_type_hints(ServiceDocument))
     assert report(stats(**document), LIMITS, NOW)["events_built"] == 7
+    assert report(stats(**document), LIMITS, NOW)["incidents"] == incidents
 
 
 def live(age_s: float, **document) -> Live:

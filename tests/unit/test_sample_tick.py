@@ -143,14 +143,17 @@ def test_the_dispatcher_hands_over_takes_in_order_with_their_ages() -> None:
     assert dict(dispatcher.rejected) == {("/imu", "undecodable"): 1}
 
 
-@pytest.fixture
-def ros_input():
+@pytest.fixture(params=["false"])
+def ros_input(request: pytest.FixtureRequest):
     """The ros input over the mock rclpy, started with a feed that records what it is
     called back with; a robot node publishes on the same graph."""
     context = mock_ros.Context(virtual_time=True)
     modules = as_rclpy.modules(context)
     modules["rclpy"].init()
-    settings = load_settings(env={"BRIDGE_INPUT": "ros"}).settings
+    # no incident window: the state streams are taken at the tick (with one, the
+    # window's topics are called back: test_a_window_topic_is_called_back_on_every_message)
+    env = {"BRIDGE_INPUT": "ros", "INCIDENT_RECORDING": request.param}
+    settings = load_settings(env=env).settings
     source = RosSource(options.source_options(settings, {}), modules.__getitem__)
     called_back: list[str] = []
 
@@ -188,6 +191,21 @@ def test_the_ros_input_returns_what_it_takes_and_calls_nothing_back(ros_input) -
     assert all(isinstance(t, TakenMessage) and 0.0 <= t.age_s <= 0.8 for t in taken)
     assert called_back == ["/diagnostics"]
     assert list(source.before_tick()) == []  # taken once
+
+
+@pytest.mark.parametrize("ros_input", ["true"], indirect=True)
+def test_a_window_topic_is_called_back_on_every_message(ros_input) -> None:
+    """While an incident window is kept (INCIDENT_RECORDING), its topics (/odom among
+    them) reach the feed on every message, and nothing is taken at the tick."""
+    source, robot, spin, called_back = ros_input
+    odometry = robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    spin(0.5)
+    for x in (1.0, 1.5, 2.0):
+        odometry.publish(odom(x))
+        spin(0.05)
+    spin(0.3)
+    assert called_back == ["/odom"] * 3
+    assert list(source.before_tick()) == []
 
 
 def test_the_sampler_imports_nothing_of_ingest() -> None:

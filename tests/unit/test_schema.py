@@ -13,7 +13,7 @@ from phytrace_edge.builder.assemble import DOMAINS
 from phytrace_edge.udm.event import format_timestamp, new_event_id
 from phytrace_edge.udm.schema import check_event, find_violation, load_schema
 
-EVENT_TYPES = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health")
+EVENT_TYPES = ("telemetry.periodic", "telemetry.topic", "log.record", "bridge.health", "incident")
 REFERENCE_EVENT = json.loads(
     (Path(__file__).parent.parent / "data/reference_event.json").read_text()
 )

@@ -306,6 +306,21 @@ def test_413_splits_until_it_fits(store) -> None:
     assert letter.event_id == "e00040" and letter.status_code == 413
 
 
+def test_incident_parts_are_counted_as_phycloud_answers_for_them(store) -> None:
+    """``status`` counts incident parts sent and refused: from the events' JSON, as the
+    bridge writes it (event_id, then event_type)."""
+    events = [
+        {"event_id": f"e{i:05d}", "event_type": "incident" if i % 3 == 0 else "x", "seq": i}
+        for i in range(12)
+    ]  # incidents: 0, 3, 6, 9
+    put_events(store, events)
+    cloud = FakeCloud(reject=lambda event: "bad" if event["seq"] in (6, 7) else None)
+    s = sender(store, cloud, batch_size=12)
+    assert s.drain() is True
+    assert (s.stats.incident_parts_sent, s.stats.incident_parts_dead_lettered) == (3, 1)
+    assert s.stats.dead_lettered == 2
+
+
 def test_per_event_rejections_in_a_2xx_are_dead_lettered(store) -> None:
     put(store, 3)
 
@@ -393,6 +408,7 @@ def test_send_stats_count_what_their_methods_say() -> None:
     stats.count_retry(UnexpectedAnswerError("a captive portal", status=200), at=14.0)
     stats.count_split()
     stats.add_dead_lettered(4)
+    stats.incident_parts(sent=3, dead_lettered=1)
     stats.set_status(400)
     assert stats.count_queue_error(QueueBusyError("busy"), at=15.0) == 1
     assert stats.count_queue_error(QueueBusyError("still busy"), at=16.0) == 2
@@ -414,6 +430,8 @@ def test_send_stats_count_what_their_methods_say() -> None:
         "last_refusal_at": 13.0,
         "live_events_sent": 2,
         "backfill_events_sent": 3,
+        "incident_parts_sent": 3,
+        "incident_parts_dead_lettered": 1,
         "newest_delivered_at": 9.0,
         "queue_errors": 2,
         "last_queue_error": "still busy",

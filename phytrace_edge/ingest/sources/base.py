@@ -34,6 +34,9 @@ class SourceOptions:
     # TOPICS_EXTRA: name -> (name subscribed on the robot, type or "" for the graph's)
     extra_topics: Mapping[str, tuple[str, str]] = field(default_factory=dict)
     qos_overrides: Mapping[str, QosChoice] = field(default_factory=dict)
+    # topics delivered on every message, never only taken at the tick: an incident's
+    # window topics and trigger topics (canonical or TOPICS_EXTRA names)
+    every_message: frozenset[str] = frozenset()
     bag_path: str = ""
     replay_rate: float = DEFAULT_REPLAY_RATE
     ros_args: tuple[str, ...] = ()  # after --ros-args: remaps, log levels, parameters

@@ -147,7 +147,11 @@ class RosSource:
         self.subscriber = subscribe_topics(
             self.api,
             self.node,
-            wanted_topics(dict(self._options.topics), dict(self._options.extra_topics)),
+            wanted_topics(
+                dict(self._options.topics),
+                dict(self._options.extra_topics),
+                self._options.every_message,
+            ),
             feed.on_message,
             dict(self._options.qos_overrides),
             take_at_tick=True,

@@ -102,27 +102,37 @@ class Wanted:
     depth: int
     sampled: bool = False  # a state stream: only its latest message counts
     extra: bool = False  # a TOPICS_EXTRA topic: taken at the tick only when it is due
+    # a state stream called back on every message all the same: an incident's window
+    # or trigger topic (its QoS is still matched as a state stream's)
+    called_back: bool = False
 
 
 def wanted_topics(
-    topics: dict[str, str], extras: dict[str, tuple[str, str]] | None = None
+    topics: dict[str, str],
+    extras: dict[str, tuple[str, str]] | None = None,
+    every_message: frozenset[str] = frozenset(),
 ) -> dict[str, Wanted]:
     """The table's topics (canonical -> actual) and TOPICS_EXTRA's (name -> (actual,
-    type or ""))."""
+    type or "")); those in ``every_message`` are called back on every message."""
     wanted = {
         canonical: Wanted(
             actual,
             TOPIC_BY_NAME[canonical].type_names,
             EVERY_MESSAGE_QUEUE_DEPTH
-            if TOPIC_BY_NAME[canonical].every_message
+            if TOPIC_BY_NAME[canonical].every_message or canonical in every_message
             else SAMPLED_QUEUE_DEPTH,
             sampled=not TOPIC_BY_NAME[canonical].every_message,
+            called_back=canonical in every_message,
         )
         for canonical, actual in topics.items()
     }
     for name, (actual, type_name) in (extras or {}).items():
         types = (type_name,) if type_name else ()
-        wanted[name] = Wanted(actual, types, SAMPLED_QUEUE_DEPTH, sampled=True, extra=True)
+        called_back = name in every_message
+        depth = EVERY_MESSAGE_QUEUE_DEPTH if called_back else SAMPLED_QUEUE_DEPTH
+        wanted[name] = Wanted(
+            actual, types, depth, sampled=True, extra=True, called_back=called_back
+        )
     return wanted
 
 
@@ -315,7 +325,7 @@ class TopicSubscriber:
 
     def _is_taken(self, wanted: Wanted) -> bool:
         """Whether this topic is taken at the tick rather than called back."""
-        return wanted.sampled and self._taken_at_tick is not None
+        return wanted.sampled and not wanted.called_back and self._taken_at_tick is not None
 
     def _subscribe(
         self, canonical: str, wanted: Wanted, message_class: type, choice: QosChoice

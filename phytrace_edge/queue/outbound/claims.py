@@ -5,6 +5,7 @@ died (``leases.take_back``). Each runs in the caller's transaction."""
 
 from __future__ import annotations
 
+import math
 import sqlite3
 from collections.abc import Iterable, Sequence
 from typing import Any
@@ -12,7 +13,7 @@ from typing import Any
 from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.encoding.frames import decode_rows
 from phytrace_edge.queue.outbound import leases
-from phytrace_edge.queue.records import Batch, DeadLetterRow
+from phytrace_edge.queue.records import INCIDENT_CLASS, Batch, DeadLetterRow
 from phytrace_edge.queue.storage.database import bump_counters
 from phytrace_edge.queue.storage.rows import (
     SIZE_COLUMNS,
@@ -42,14 +43,17 @@ def lease_oldest(
 ) -> Leased:
     """The backfill lane: lease the oldest free events, whole rows of at most
     ``limits`` = (events, bytes of JSON) (always one row), to ``token`` until
-    ``until``; the ranges leased and their rows, oldest first. With ``important_first``, the
-    important events of the oldest hour still queued go first, a lease each."""
+    ``until``; the ranges leased and their rows, oldest first. With ``important_first``,
+    incidents' parts go first, whenever they were queued, and then the important events
+    of the oldest hour still queued, a lease each (an export takes strictly the oldest)."""
     oldest = next(leases.unleased(cursor, now, SIZE_COLUMNS, limits[0]), None)
     if oldest is None:
         return [], []
     sizes = _sized(oldest.rows)
     if important_first:
-        ahead = _important_in_band(cursor, now, sizes[0].queued_at + BAND_S, limits)
+        ahead = _unleased_of_class(
+            cursor, now, INCIDENT_CLASS, math.inf, limits
+        ) or _unleased_of_class(cursor, now, 1, sizes[0].queued_at + BAND_S, limits)
         if ahead:
             return _lease(cursor, [(row.id, row.last_id) for row in ahead], token, until)
     kept = _within(sizes, limits)
@@ -96,16 +100,20 @@ def _within(sizes: list[RowSize], limits: tuple[int, int]) -> int:
     return kept
 
 
-def _important_in_band(
-    cursor: sqlite3.Cursor, now: float, before: float, limits: tuple[int, int]
+def _unleased_of_class(
+    cursor: sqlite3.Cursor, now: float, row_class: int, before: float, limits: tuple[int, int]
 ) -> list[RowSize]:
-    """Unleased important rows queued before ``before``, oldest first, within
-    ``limits`` (found by the partial index on important rows, not a scan)."""
+    """Unleased rows of ``row_class`` (1 important, 2 an incident's part) queued before
+    ``before``, oldest first, within ``limits`` (found by the class's partial index, not
+    a scan: the literal class lets SQLite use it)."""
+    if row_class not in (1, INCIDENT_CLASS):
+        raise ValueError(f"no index for row class {row_class}")
     rows = _sized(
         cursor.execute(
             f"SELECT {SIZE_COLUMNS} FROM events AS e "
-            "WHERE important = 1 AND queued_at < ? AND NOT EXISTS (SELECT 1 FROM leases "
-            "WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) ORDER BY id LIMIT ?",
+            f"WHERE important = {row_class} AND queued_at < ? AND NOT EXISTS (SELECT 1 "
+            "FROM leases WHERE e.id BETWEEN first_id AND last_id AND expires_at > ?) "
+            "ORDER BY id LIMIT ?",
             (before, now, limits[0]),
         )
     )

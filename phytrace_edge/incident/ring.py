@@ -1,0 +1,79 @@
+"""The rolling window: every reading of the window topics, oldest first, bounded in
+time and in bytes.
+
+A reading is kept as its JSON (orjson), not as the handler's dict: JSON is what an
+incident ships, it is several times smaller in memory than nested dicts, and its
+length is an honest measure for INCIDENT_BUFFER_MAX_BYTES. Each sample counts its
+JSON and ``SAMPLE_OVERHEAD_BYTES`` for the Python objects that hold it.
+
+Samples older than the horizon (INCIDENT_BEFORE_S, or the open incident's start) leave
+quietly; samples the byte bound pushes out while still inside it are counted
+(``dropped``), by topic, so that an incident can say what it lacks.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import orjson
+
+SAMPLE_OVERHEAD_BYTES = 160  # the Sample, its bytes object and the deque's slot
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One reading of one topic: when it was received on the input's timeline
+    (``at_s``: monotonic, for the window's arithmetic; ``wall_s``: its stamp) and its
+    JSON."""
+
+    topic: str
+    at_s: float
+    wall_s: float
+    json: bytes
+
+    @property
+    def size(self) -> int:
+        return len(self.json) + SAMPLE_OVERHEAD_BYTES
+
+
+class WindowRing:
+    """Samples in time order; ``add`` keeps them within ``max_bytes``."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes = max_bytes
+        self._samples: deque[Sample] = deque()
+        self.bytes = 0
+        self.dropped: Counter[str] = Counter()  # by topic: pushed out by the byte bound
+
+    def __len__(self) -> int:
+        return len(self._samples)
+
+    def add(
+        self, topic: str, reading: Mapping[str, Any], at_s: float, wall_s: float
+    ) -> tuple[Sample, ...]:
+        """Keep ``reading``; beyond the byte bound the oldest samples go, counted, and
+        are returned (usually none)."""
+        sample = Sample(topic, at_s, wall_s, orjson.dumps(reading))
+        self._samples.append(sample)
+        self.bytes += sample.size
+        if self.bytes <= self.max_bytes:
+            return ()
+        evicted = []
+        while self.bytes > self.max_bytes and self._samples:
+            oldest = self._samples.popleft()
+            self.bytes -= oldest.size
+            self.dropped[oldest.topic] += 1
+            evicted.append(oldest)
+        return tuple(evicted)
+
+    def forget_before(self, horizon_s: float) -> None:
+        """Let the samples received before ``horizon_s`` go (they left the window)."""
+        while self._samples and self._samples[0].at_s < horizon_s:
+            self.bytes -= self._samples.popleft().size
+
+    def between(self, start_s: float, end_s: float) -> Iterator[Sample]:
+        """The samples received in [start_s, end_s], oldest first."""
+        return (s for s in self._samples if start_s <= s.at_s <= end_s)
