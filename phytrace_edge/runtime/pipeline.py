@@ -8,10 +8,13 @@ state topics from the source (``before_tick``, which returns them), hands them t
 dispatcher, then builds one event from the builder's latest readings and gives it to
 ``emit``. A live input ticks on the sampler's own loop; an input that keeps its own
 time (a bag on its timeline, the simulator in virtual time) ticks from its loop.
+An input that can take a mark by hand (the ``ros`` input's ``~/mark`` service) is
+given ``Pipeline.mark``: the incident recorder's answer, as a ``MarkReply``.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,9 +23,11 @@ from phytrace_edge.builder.builder import UDMBuilder
 from phytrace_edge.builder.sampler import Sampler
 from phytrace_edge.incident.recorder import IncidentRecorder
 from phytrace_edge.ingest.dispatch import Dispatcher
-from phytrace_edge.ingest.sources.base import Feed, Source
+from phytrace_edge.ingest.sources.base import Feed, MarkReply, Source
 from phytrace_edge.runtime.supervisor import Beat
 from phytrace_edge.udm.types import Built
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -50,7 +55,30 @@ class Pipeline:
                 self.sampler.period_s,
                 self.dispatcher.on_unreadable,
                 self.builder.extra_due,
+                self.mark,
             )
+        )
+
+    def mark(self, reason: str) -> MarkReply:
+        """A mark by hand through the input, now: what became of it, in words."""
+        marked = self.recorder.mark(reason)
+        log.warning("incident marked by hand (%s): %s", marked.outcome, reason)
+        ident = marked.incident_id
+        if marked.outcome == "opened":
+            return MarkReply(True, f"incident {ident} opened: sent once its window ends")
+        if marked.outcome == "extended":
+            return MarkReply(
+                True, f"incident {ident} was already being recorded: its window now ends later"
+            )
+        if marked.outcome == "rate_limited":
+            limit = self.recorder.options.max_per_hour
+            return MarkReply(
+                False,
+                f"rate-limited: nothing recorded, {limit} incident(s) were recorded in the "
+                "last hour (INCIDENT_MAX_PER_HOUR)",
+            )
+        return MarkReply(
+            False, "off: nothing recorded, incident recording is off (INCIDENT_RECORDING=false)"
         )
 
     def ingest(self, stop: threading.Event, beat: Beat) -> None:

@@ -285,8 +285,9 @@ def test_an_rclpy_that_fails_to_import_says_why() -> None:
 
 def test_state_streams_are_taken_at_the_tick_not_called_back(graph) -> None:
     """Odometry at 50 Hz into a 5 Hz sample tick: no callback per message, the newest
-    message taken at each tick; diagnostics (every message counts) still called back."""
-    g = graph(SAMPLE_RATE_HZ="5")
+    message taken at each tick; diagnostics (every message counts) still called back.
+    (No incident window: with one, /odom is called back on every message.)"""
+    g = graph(SAMPLE_RATE_HZ="5", INCIDENT_RECORDING="false")
     odometry = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
     diagnostics = g.robot.create_publisher(m.DiagnosticArray, "/diagnostics", RELIABLE)
     g.run(GRAPH_CHECK_S + 0.1)
@@ -299,6 +300,19 @@ def test_state_streams_are_taken_at_the_tick_not_called_back(graph) -> None:
     assert g.received("/diagnostics") == 50
     assert ticks < 25 and abs(g.received("/odom") - ticks) <= 1  # one per tick, no more
     assert g.events[-1]["location"]["local"]["x_m"] >= 48.0  # the newest at that tick
+
+
+def test_a_window_topic_is_called_back_on_every_message(graph) -> None:
+    """With the incident window kept (the default), odometry at 50 Hz reaches the
+    dispatcher on every message, and the tick's event still has the newest."""
+    g = graph(SAMPLE_RATE_HZ="5")
+    odometry = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    g.run(GRAPH_CHECK_S + 0.1)
+    for i in range(50):
+        odometry.publish(odom(float(i)))
+        g.run(0.02)
+    assert g.received("/odom") == 50
+    assert g.events[-1]["location"]["local"]["x_m"] >= 48.0
 
 
 def test_an_incompatible_state_stream_is_counted_from_the_graph(graph) -> None:

@@ -222,6 +222,14 @@ class Rig:
     def parameters(self, node: str, call: str, answer_s: float = 2.0, **args: Any) -> Any:
         return self.command("parameters", node=node, call=call, answer_s=answer_s, **args)
 
+    def call_trigger(self, service: str, answer_s: float = 10.0) -> dict[str, Any] | None:
+        """A ``std_srvs/srv/Trigger`` service called from the robot's node: its answer
+        (``success``, ``message``), or None when none came within ``answer_s``."""
+        answer: dict[str, Any] | None = self.command(
+            "call_trigger", service=service, answer_s=answer_s
+        )
+        return answer
+
     # the bridge
     def start_bridge(
         self,
@@ -313,6 +321,25 @@ class Rig:
             return next((e for e in reversed(self.events(event_type)) if predicate(e)), None)
 
         return wait_for(found, EVENT_WAIT_S, what, every=0.2)
+
+    def wait_incident(self, incident_id: str | None = None) -> list[dict[str, Any]]:
+        """Every part of an incident at the stub (``incident_id``'s, or the first
+        one's), by part number, once all of them came."""
+
+        def complete() -> list[dict[str, Any]] | None:
+            self._bridge_alive()
+            events = self.events("incident")
+            ident = incident_id or next((e["incident"]["id"] for e in events), None)
+            parts = sorted(
+                (e for e in events if e["incident"]["id"] == ident),
+                key=lambda e: e["incident"]["part"],
+            )
+            return parts if parts and len(parts) == parts[0]["incident"]["parts"] else None
+
+        parts: list[dict[str, Any]] = wait_for(
+            complete, EVENT_WAIT_S, f"incident {incident_id or ''} at the stub", every=0.2
+        )
+        return parts
 
     def _bridge_alive(self) -> None:
         code = self.bridge_process.poll()

@@ -20,6 +20,8 @@ Commands (``op`` and its arguments) -> ``{"ok": true, "result": ...}`` or
     nodes                                                                 -> full names
     parameters node, call ("list", "get", "describe", "set"), names or values,
                answer_s -> the answer, or null when none came within answer_s
+    call_trigger service (a std_srvs/srv/Trigger service's name), answer_s
+               -> {"success", "message"}, or null when no answer came within answer_s
     start_bridge argv, env (--mock only)
 """
 
@@ -169,6 +171,23 @@ class Robot:
                 for d in response.descriptors
             }
         return [{"successful": r.successful, "reason": r.reason} for r in response.results]
+
+    def call_trigger(self, service: str, answer_s: float) -> dict[str, Any] | None:
+        """What ``ros2 service call SERVICE std_srvs/srv/Trigger`` does, from this node."""
+        from std_srvs.srv import Trigger
+
+        client = self.node.create_client(Trigger, service)
+        try:
+            if not client.wait_for_service(timeout_sec=DISCOVERY_S):
+                raise RuntimeError(f"no service {service} within {DISCOVERY_S:g} s")
+            future = client.call_async(Trigger.Request())
+            self.executor.spin_until_future_complete(future, timeout_sec=answer_s)
+            if not future.done():
+                return None
+            response = future.result()
+            return {"success": response.success, "message": response.message}
+        finally:
+            self.node.destroy_client(client)
 
 
 class ParameterServices:

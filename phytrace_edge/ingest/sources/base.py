@@ -7,6 +7,10 @@ hands to the dispatcher); it never builds events itself. The one tick loop
 (``builder.sampler``) builds them: in a thread of its own for live inputs, or called
 through ``Feed.tick`` by an input that keeps its own time (a bag on its timeline, the
 simulator in virtual time).
+
+A feed may also take a mark (``Feed.mark``): an incident's trigger by hand, which an
+input that can serve one (the ``ros`` input's ``~/mark`` service) hands over with a
+reason, answered with a ``MarkReply``; the data still flows one way, into the pipeline.
 """
 
 from __future__ import annotations
@@ -67,6 +71,15 @@ class OnMessage(Protocol):
 
 
 @dataclass(frozen=True)
+class MarkReply:
+    """The answer to a mark: whether an incident records it (opened or extended), and
+    what to tell the caller (the incident's id, or why nothing is recorded)."""
+
+    accepted: bool
+    message: str
+
+
+@dataclass(frozen=True)
 class Feed:
     """Where a source delivers: each message, and (for sources that keep their own
     time) each sample tick with its ``captured_at`` (None = the wall clock); a tick
@@ -75,13 +88,15 @@ class Feed:
     counted with the topic's rejects. ``due`` says whether a ``TOPICS_EXTRA`` topic
     is due now (its ``rate_hz``): a source that takes messages at the tick takes an
     extra topic's only then, so a topic sent once a second is not deserialised at
-    every tick."""
+    every tick. ``mark`` (None: no marks through the input) takes a mark by hand with
+    its reason and says what became of it; it may be called on any thread."""
 
     on_message: OnMessage
     tick: Callable[[float | None], bool]
     sample_period_s: float
     on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable
     due: Callable[[str], bool] = always_due
+    mark: Callable[[str], MarkReply] | None = None
 
 
 def age_at_take(received_ns: int, now_ns: int, waited_s: float) -> float:

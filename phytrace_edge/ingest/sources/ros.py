@@ -2,13 +2,16 @@
 imports it (lazily: rclpy comes with ROS 2 or its wheels, and the core runs without).
 
 One node, ``phytrace_edge``: its executor runs the callbacks of the topics where every
-message counts, the graph checks and the parameter services; the state streams are
-taken at the sample tick (``ros_graph.taken_at_the_tick``).
+message counts (an incident's window topics among them, while recording), the graph
+checks, the parameter services and the ``~/mark`` service (``std_srvs/srv/Trigger``:
+an incident marked by hand); the state streams are taken at the sample tick
+(``ros_graph.taken_at_the_tick``).
 """
 
 from __future__ import annotations
 
 import importlib
+import logging
 import threading
 from collections.abc import Callable, Mapping, Sequence
 from types import ModuleType
@@ -17,7 +20,13 @@ from typing import Any
 from phytrace_edge.errors import ConfigError
 from phytrace_edge.ingest.dispatch import Take
 from phytrace_edge.ingest.generic import rosidl_field_types
-from phytrace_edge.ingest.sources.base import NODE_NAME, Feed, Finished, SourceOptions
+from phytrace_edge.ingest.sources.base import (
+    NODE_NAME,
+    Feed,
+    Finished,
+    MarkReply,
+    SourceOptions,
+)
 from phytrace_edge.ingest.sources.ros_graph import (
     RosApi,
     Taken,
@@ -27,7 +36,11 @@ from phytrace_edge.ingest.sources.ros_graph import (
     wanted_topics,
 )
 
+log = logging.getLogger(__name__)
+
 SPIN_TIMEOUT_S = 0.1
+MARK_SERVICE = "~/mark"  # /phytrace_edge/mark, under the node's namespace
+MARK_SERVICE_REASON = "~/mark service call"  # a Trigger request carries no reason
 
 
 def load_rclpy(import_module: Callable[[str], ModuleType] = importlib.import_module) -> RosApi:
@@ -129,6 +142,7 @@ class RosSource:
         self.node: Any = None
         self.executor: Any = None
         self.subscriber: TopicSubscriber | None = None  # once started
+        self.mark_service: Any = None  # once started, when the feed takes marks
 
     def start(self, feed: Feed) -> None:
         ros_args = self._options.ros_args
@@ -157,8 +171,39 @@ class RosSource:
             take_at_tick=True,
             due=feed.due,
         )
+        if feed.mark is not None:
+            self.mark_service = self._serve_marks(feed.mark)
         self.executor = self._executors.SingleThreadedExecutor()
         self.executor.add_node(self.node)
+
+    def _serve_marks(self, mark: Callable[[str], MarkReply]) -> Any:
+        """``~/mark`` (``std_srvs/srv/Trigger``) on the node, answered in the executor's
+        thread; None, with one WARNING, when std_srvs is not installed (the bridge runs
+        on without it: ``phytrace-edge mark`` still marks)."""
+        try:
+            trigger = self._import("std_srvs.srv").Trigger
+        except ImportError as exc:
+            log.warning(
+                "no %s service: the ROS package std_srvs does not import (%s: %s); install "
+                "it (ros-<distro>-std-srvs from apt, or the ros-std-srvs wheel) for incident "
+                "marks over ROS; phytrace-edge mark works without it",
+                MARK_SERVICE,
+                type(exc).__name__,
+                exc,
+            )
+            return None
+
+        def on_call(request: Any, response: Any) -> Any:
+            try:
+                reply = mark(MARK_SERVICE_REASON)
+            except Exception as exc:  # an exception here would leave the executor
+                log.exception("%s failed", MARK_SERVICE)
+                reply = MarkReply(False, f"the bridge could not take the mark: {exc}")
+            response.success = reply.accepted
+            response.message = reply.message
+            return response
+
+        return self.node.create_service(trigger, MARK_SERVICE, on_call)
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:
         while not stop.is_set():

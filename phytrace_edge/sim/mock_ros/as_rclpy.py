@@ -1,10 +1,10 @@
 """The mock laid out as rclpy's modules, for code that imports rclpy by name.
 
-``modules(context)`` gives ``rclpy``, ``rclpy.qos``, ``rclpy.executors``, ... and the
-message packages (``sensor_msgs.msg``, ...) with every function bound to one mock
-context; ``install(context)`` puts them in ``sys.modules``, so that ``import rclpy``
-in this process gets the mock (the ROS test rig runs the bridge's ``ros`` input, and
-the robot's own code, unchanged on it).
+``modules(context)`` gives ``rclpy``, ``rclpy.qos``, ``rclpy.executors``, ..., the
+message packages (``sensor_msgs.msg``, ...) and the service packages (``std_srvs.srv``)
+with every function bound to one mock context; ``install(context)`` puts them in
+``sys.modules``, so that ``import rclpy`` in this process gets the mock (the ROS test
+rig runs the bridge's ``ros`` input, and the robot's own code, unchanged on it).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import sys
 from types import ModuleType
 from typing import Any
 
-from phytrace_edge.sim.mock_ros import callback_groups, messages, qos, services
+from phytrace_edge.sim.mock_ros import callback_groups, messages, qos, service_types, services
 from phytrace_edge.sim.mock_ros import parameters as params
 from phytrace_edge.sim.mock_ros.clock import Clock, ClockType, Time
 from phytrace_edge.sim.mock_ros.executor import SingleThreadedExecutor
@@ -92,6 +92,14 @@ def modules(context: Context | None = None) -> dict[str, ModuleType]:
     for package, classes in packages.items():
         found[package] = _module(package)
         found[f"{package}.msg"] = _module(f"{package}.msg", **classes)
+    service_packages: dict[str, dict[str, Any]] = {}
+    assert service_types.Trigger in service_types.SERVICE_TYPES.values()  # declared
+    for type_name, srv in service_types.SERVICE_TYPES.items():
+        package, _, name = type_name.split("/")
+        service_packages.setdefault(package, {})[name] = srv
+    for package, classes in service_packages.items():
+        found.setdefault(package, _module(package))
+        found[f"{package}.srv"] = _module(f"{package}.srv", **classes)
     return found
 
 

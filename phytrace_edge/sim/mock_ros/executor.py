@@ -1,7 +1,7 @@
 """The mock's executor: runs ready callbacks of its nodes, one per ``spin_once``, in
 the thread that spins (as rclpy's SingleThreadedExecutor does), in real or virtual time.
 Like rclpy's, it leaves alone every entity whose callback group says it cannot run,
-and it answers its nodes' service requests.
+answers its nodes' service requests and completes their clients' futures.
 """
 
 from __future__ import annotations
@@ -87,8 +87,12 @@ class SingleThreadedExecutor:
                 return functools.partial(subscription.callback, msg)
             for service in node.services:
                 if service.pending and self._runs(service):
-                    request, future = service.pending.popleft()
-                    return functools.partial(_answer, service.handler, request, future)
+                    request, future, client = service.pending.popleft()
+                    return functools.partial(service.answer, request, future, client)
+            for client in node.clients:
+                if client.responses and self._runs(client):
+                    response, future = client.responses.popleft()
+                    return functools.partial(future.set_result, response)
         # timers due at the same moment fire in the order they were made, whatever
         # node they belong to (rclpy's order is unspecified; a fixed one keeps a
         # simulation repeatable)
@@ -105,7 +109,3 @@ class SingleThreadedExecutor:
             if not t.cancelled and self._runs(t)
         ]
         return min(calls) if calls else None
-
-
-def _answer(handler: Callable[[Any], Any], request: Any, future: Future) -> None:
-    future.set_result(handler(request))

@@ -144,7 +144,8 @@ class Message:
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        MESSAGE_TYPES[cls._type] = cls
+        if "/msg/" in cls._type:  # a service's request and response are no messages
+            MESSAGE_TYPES[cls._type] = cls
 
     def __init__(self, **kwargs: Any) -> None:
         unknown = set(kwargs) - set(self._fields_and_field_types)
@@ -181,13 +182,14 @@ class Message:
     __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
-        package, _, name = self._type.split("/")
+        package, kind, name = self._type.split("/")  # kind: msg, or srv
         args = ", ".join(f"{f}={getattr(self, f)!r}" for f in self._fields_and_field_types)
-        return f"{package}.msg.{name}({args})"
+        return f"{package}.{kind}.{name}({args})"
 
 
 def declare(type_name: str, fields: dict[str, str], **extra: Any) -> type[Message]:
-    """Declare one message class, e.g. ``declare("std_msgs/msg/String", {"data": "string"})``."""
+    """Declare one message class, e.g. ``declare("std_msgs/msg/String", {"data": "string"})``
+    (or a service's request or response: ``std_srvs/srv/Trigger_Response``)."""
     name = type_name.split("/")[-1]
     namespace = {"_type": type_name, "_fields_and_field_types": fields, **extra}
     return type(name, (Message,), namespace)

@@ -15,7 +15,10 @@ Semantics kept from ROS 2 on DDS, because the bridge's behaviour depends on them
   the current publishers, so code that discovers topics and matches QoS can be tested.
 - An executor runs only what a node's callback groups allow (``callback_groups.py``),
   and every node offers the parameter services, answered only while an executor spins
-  it (``services.py``); node loggers publish to ``/rosout``, as rcl does.
+  it; ``create_service`` and ``create_client`` (``~/name`` expands to the node's fully
+  qualified name) work the same way, a client's future done only once an executor
+  spins the client's node too (``services.py``); node loggers publish to ``/rosout``,
+  as rcl does.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from phytrace_edge.sim.mock_ros.qos import (
     as_profile,
 )
 from phytrace_edge.sim.mock_ros.rosout import NodeLogger
-from phytrace_edge.sim.mock_ros.services import Service, parameter_services
+from phytrace_edge.sim.mock_ros.services import Client, Service, parameter_services, typed_handler
 
 # Discovery is not instant in DDS: a new publisher shows in the graph, and its
 # messages reach a subscription, only once the two have found each other; what it
@@ -192,6 +195,7 @@ class Node(Parameters):
         self.subscriptions: list[Subscription] = []
         self.publishers: list[Publisher] = []
         self.services: list[Service] = parameter_services(self, self.default_callback_group)
+        self.clients: list[Client] = []
         self._logger = NodeLogger(self)
         with self.context.condition:
             self.context.nodes.append(self)
@@ -270,6 +274,72 @@ class Node(Parameters):
         self.timers.append(timer)
         return timer
 
+    def resolve_service_name(self, service: str, *, only_expand: bool = False) -> str:
+        """``~/x`` -> the node's fully qualified name + ``/x``, ``x`` -> under the
+        namespace, ``/x`` as it is (rcl's expansion; the mock has no remapping)."""
+        if service == "~" or service.startswith("~/"):
+            return self.get_fully_qualified_name() + service[1:]
+        if service.startswith("/"):
+            return service
+        return f"{self._namespace.rstrip('/')}/{service}"
+
+    def create_service(
+        self,
+        srv_type: Any,
+        srv_name: str,
+        callback: Callable[[Any, Any], Any],
+        *,
+        qos_profile: QoSProfile | None = None,
+        callback_group: CallbackGroup | None = None,
+    ) -> Service:
+        """Offer ``srv_name``: ``callback(request, response)`` returns the response,
+        run by the executor that spins this node."""
+        service = Service(
+            self.resolve_service_name(srv_name),
+            typed_handler(srv_type, callback),
+            callback_group or self.default_callback_group,
+            srv_type=srv_type,
+            srv_name=srv_name,
+        )
+        with self.context.condition:
+            self.services.append(service)
+            self.context.condition.notify_all()  # clients wait for services to appear
+        return service
+
+    def create_client(
+        self,
+        srv_type: Any,
+        srv_name: str,
+        *,
+        qos_profile: QoSProfile | None = None,
+        callback_group: CallbackGroup | None = None,
+    ) -> Client:
+        client = Client(
+            self,
+            srv_type,
+            srv_name,
+            self.resolve_service_name(srv_name),
+            callback_group or self.default_callback_group,
+        )
+        with self.context.condition:
+            self.clients.append(client)
+        return client
+
+    def destroy_service(self, service: Service) -> bool:
+        with self.context.condition:
+            if service in self.services:
+                self.services.remove(service)
+                return True
+        return False
+
+    def destroy_client(self, client: Client) -> bool:
+        with self.context.condition:
+            client.destroyed = True
+            if client in self.clients:
+                self.clients.remove(client)
+                return True
+        return False
+
     def destroy_subscription(self, subscription: Subscription) -> bool:
         with self.context.condition:
             if subscription in self.context.subscriptions:
@@ -295,6 +365,8 @@ class Node(Parameters):
             self.destroy_publisher(publisher)
         for timer in self.timers:
             timer.cancel()
+        for client in list(self.clients):
+            self.destroy_client(client)
         self.services.clear()
         with self.context.condition:
             if self in self.context.nodes:
