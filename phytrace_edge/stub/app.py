@@ -4,6 +4,10 @@ POST /api/v1/events checks the API key, decodes gzip/zstd, validates every event
 against the UDM schema, stores new events (deduplicated by event_id) and answers
 with counts. Fault injection (latency, errors, Retry-After, dropped connections)
 applies to POST /api/v1/events only.
+
+GET /incidents and GET /incidents/{id} are the live page's view of ``incident``
+events (UDM 1.3.0), put together from their parts; like ``/`` and ``/healthz`` they are
+the stub's own, not PhyCloud's API (not in docs/phycloud-openapi.yaml).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from starlette.routing import Route
 
 from phytrace_edge.stub.board import Board
 from phytrace_edge.stub.faults import Faults, decide
-from phytrace_edge.stub.store import StubStore
+from phytrace_edge.stub.store import IncidentTooLarge, StubStore
 from phytrace_edge.stub.validate import find_violation
 
 log = logging.getLogger(__name__)
@@ -33,6 +37,8 @@ log = logging.getLogger(__name__)
 MAX_BODY_BYTES = 10 * 1024 * 1024
 MAX_DECODED_BYTES = 64 * 1024 * 1024
 MAX_EVENTS = 10_000
+MAX_INCIDENTS = 1000  # in one answer of GET /incidents
+MAX_TOPICS = 256  # named in one GET /incidents/{id} (as many as an incident may hold)
 
 
 class DroppedConnection(Exception):
@@ -181,6 +187,33 @@ class Stub:
     async def get_robots(self, request: Request) -> Response:
         return _json(200, {"robots": self.board.summary()})
 
+    async def get_incidents(self, request: Request) -> Response:
+        """The newest incidents first, each with its trigger, window, parts received
+        and missing, and sample counts by topic."""
+        try:
+            limit = int(request.query_params.get("limit", 50))
+            if not 1 <= limit <= MAX_INCIDENTS:
+                raise ValueError
+        except ValueError:
+            return _json(400, {"error": f"limit must be from 1 to {MAX_INCIDENTS}"})
+        incidents = self.store.incidents(request.query_params.get("source_id"), limit)
+        return _json(200, {"incidents": incidents})
+
+    async def get_incident(self, request: Request) -> Response:
+        """One incident with ``samples``: its received parts' samples joined per topic,
+        in time order; ``?topic=/odom&topic=/imu/data`` for some topics only."""
+        incident_id = request.path_params["incident_id"]
+        topics = request.query_params.getlist("topic")
+        if len(topics) > MAX_TOPICS:
+            return _json(400, {"error": f"more than {MAX_TOPICS} topics asked for"})
+        try:
+            incident = self.store.incident(incident_id, topics)
+        except IncidentTooLarge as exc:
+            return _json(413, {"error": f"{exc}: ask for fewer topics (?topic=/odom)"})
+        if incident is None:
+            return _json(404, {"error": f"no incident {incident_id!r}"})
+        return _json(200, incident)
+
     async def get_faults(self, request: Request) -> Response:
         return _json(200, self.faults.as_dict())
 
@@ -208,6 +241,8 @@ def create_app(stub: Stub) -> Starlette:
         routes=[
             Route("/", stub.page),
             Route("/healthz", stub.health),
+            Route("/incidents", stub.get_incidents),
+            Route("/incidents/{incident_id}", stub.get_incident),
             Route("/api/v1/events", stub.post_events, methods=["POST"]),
             Route("/api/v1/events", stub.get_events, methods=["GET"]),
             Route("/api/v1/stats", stub.get_stats),
