@@ -51,6 +51,9 @@ class ClosedIncident:
     triggers: int = 1
     dropped: dict[str, int] = field(default_factory=dict)  # by topic: the byte bound
     cut_short: bool = False  # closed by a stop before INCIDENT_AFTER_S had passed
+    # the trigger's moment on the wall clock at the close (None: ``trigger.wall_s``); the
+    # id stays derived from ``trigger.wall_s``, the moment as the trigger was stamped
+    trigger_at_wall_s: float | None = None
 
 
 def incident_id(identity: UdmIdentity, trigger: Trigger) -> str:
@@ -77,7 +80,7 @@ def incident_events(
             id=ident,
             part=number,
             parts=len(slices),
-            trigger=_trigger(closed.trigger),
+            trigger=_trigger(closed.trigger, closed.trigger_at_wall_s),
             window=IncidentWindow(
                 start=format_timestamp(closed.start_wall_s), end=format_timestamp(closed.end_wall_s)
             ),
@@ -98,10 +101,9 @@ def incident_events(
     return events
 
 
-def _trigger(trigger: Trigger) -> IncidentTrigger:
-    described = IncidentTrigger(
-        kind=trigger.kind, message=trigger.message, at=format_timestamp(trigger.wall_s)
-    )
+def _trigger(trigger: Trigger, at_wall_s: float | None) -> IncidentTrigger:
+    at = trigger.wall_s if at_wall_s is None else at_wall_s
+    described = IncidentTrigger(kind=trigger.kind, message=trigger.message, at=format_timestamp(at))
     if trigger.topic is not None:
         described["topic"] = trigger.topic
     if trigger.level is not None:

@@ -23,14 +23,14 @@ from __future__ import annotations
 
 import threading
 from collections import Counter, deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol
 
 from phytrace_edge.incident.figures import IncidentFigures
 from phytrace_edge.incident.options import IncidentOptions
 from phytrace_edge.incident.parts import ClosedIncident, incident_events, incident_id
-from phytrace_edge.incident.ring import WindowRing
+from phytrace_edge.incident.ring import Sample, WindowRing
 from phytrace_edge.incident.triggers import Trigger, TriggerRules, shortened
 from phytrace_edge.udm.types import Built, UdmIdentity
 
@@ -61,9 +61,6 @@ class _Open:
     triggers: int = 1
     dropped: Counter[str] = field(default_factory=Counter)
 
-    def wall(self, at_s: float) -> float:
-        return self.trigger.wall_s + (at_s - self.trigger.at_s)
-
 
 class IncidentRecorder:
     """See the module doc; ``counts`` and ``samples_dropped`` are for ``status``."""
@@ -74,8 +71,12 @@ class IncidentRecorder:
         identity: UdmIdentity,
         max_part_bytes: int,
         clock: Clock,
+        unsynchronized: Callable[[], bool] | None = None,
     ) -> None:
+        """``unsynchronized`` says whether the wall clock that stamps incidents is not
+        synchronized now (None: the stamps are not this machine's, as a bag's)."""
         self.options = options
+        self._unsynchronized = unsynchronized
         self._identity = identity
         self._max_part_bytes = max_part_bytes
         self._clock = clock
@@ -180,17 +181,27 @@ class IncidentRecorder:
         self._ring.forget_before(horizon if current is None else min(horizon, current.start_s))
 
     def _close(self, current: _Open, end_s: float, cut_short: bool) -> None:
+        """Every time of the incident is said on the wall clock as it is at the close,
+        from the timeline (``at_s``): a wall-clock step during the window (a robot's
+        first NTP sync) cannot leave part of it years off, and the incident's stamps
+        agree with the events queued beside it (repaired as they are, docs/udm.md)."""
+        offset = self._clock.wall() - self._clock.monotonic()
+        samples = [
+            Sample(s.topic, s.at_s, offset + s.at_s, s.json)
+            for s in self._ring.between(current.start_s, end_s)
+        ]
         self._closed.append(
             ClosedIncident(
                 trigger=current.trigger,
                 start_s=current.start_s,
                 end_s=end_s,
-                start_wall_s=current.wall(current.start_s),
-                end_wall_s=current.wall(end_s),
-                samples=list(self._ring.between(current.start_s, end_s)),
+                start_wall_s=offset + current.start_s,
+                end_wall_s=offset + end_s,
+                samples=samples,
                 triggers=current.triggers,
                 dropped=dict(current.dropped),
                 cut_short=cut_short,
+                trigger_at_wall_s=offset + current.trigger.at_s,
             )
         )
         self._open = None
@@ -200,8 +211,12 @@ class IncidentRecorder:
 
     def _events(self, closed: Iterable[ClosedIncident]) -> list[Built]:
         built = []
+        unsynchronized = self._unsynchronized is not None and self._unsynchronized()
         for incident in closed:
             parts = incident_events(self._identity, incident, self._max_part_bytes)
+            if unsynchronized:  # as every event: a later step repairs it (docs/udm.md)
+                for part in parts:
+                    part["wall_clock"] = {"synchronized": False}
             self.counts["parts"] += len(parts)
             built += [Built(event, important=True) for event in parts]
         return built

@@ -20,7 +20,7 @@ from typing import Any
 
 import orjson
 
-SAMPLE_OVERHEAD_BYTES = 160  # the Sample, its bytes object and the deque's slot
+SAMPLE_OVERHEAD_BYTES = 240  # the Sample, its bytes object and the deque's slot (measured)
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,10 @@ class WindowRing:
     ) -> tuple[Sample, ...]:
         """Keep ``reading``; beyond the byte bound the oldest samples go, counted, and
         are returned (usually none)."""
-        sample = Sample(topic, at_s, wall_s, orjson.dumps(reading))
+        # a copy: the bytes orjson returns keep its whole working buffer (4 KiB) alive
+        # behind a few hundred bytes of JSON, which made a full 16 MiB ring 192 MiB of RSS
+        # (docs/benchmarks.md, "Incident window")
+        sample = Sample(topic, at_s, wall_s, bytes(memoryview(orjson.dumps(reading))))
         self._samples.append(sample)
         self.bytes += sample.size
         if self.bytes <= self.max_bytes:

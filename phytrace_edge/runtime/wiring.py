@@ -77,7 +77,7 @@ def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -
     clock = source.clock or SystemClock()  # one timeline for events and incidents
     builder = UDMBuilder(options.builder_options(s), clock, source.field_types, unsynchronized)
     recorder = IncidentRecorder(
-        options.incident_options(s), builder.identity, s.batch_max_bytes, clock
+        options.incident_options(s), builder.identity, s.batch_max_bytes, clock, unsynchronized
     )
 
     def on_reading(topic: str, reading: Reading, age_s: float) -> None:

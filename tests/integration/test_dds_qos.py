@@ -205,16 +205,21 @@ def captured_s(event: dict[str, Any]) -> float:
     return datetime.fromisoformat(event["captured_at"].replace("Z", "+00:00")).timestamp()
 
 
-def test_a_sample_taken_at_the_tick_is_as_old_as_its_writing(tmp_path: Path) -> None:
+@pytest.mark.parametrize("recording", [False, True], ids=["taken-at-tick", "incident-window"])
+def test_a_sample_taken_at_the_tick_is_as_old_as_its_writing(
+    tmp_path: Path, recording: bool
+) -> None:
     """Odometry is taken at the sample tick (1 Hz here), up to a second after it was
     written: the first event with each new position says how long ago (Cyclone gives
     the writer's stamp), so ``captured_at - age_s`` is when it was written (it was the
-    tick's own time: ``age_s`` 0.0)."""
+    tick's own time: ``age_s`` 0.0). With incident recording on, /odom is a window
+    topic, delivered as it comes (issue 35): its age is then from its arrival, and
+    says the same."""
     ros = private_loopback_domain()
     robot = DdsRobot(ros, tmp_path / "robot.log")
     type_name, _, fields = KNOWN["/odom"]
     odom = robot.writer("/odom", type_name, "reliable")  # one sample each: none lost
-    heard = started(robot, ros, SAMPLE_RATE_HZ="1")
+    heard = started(robot, ros, SAMPLE_RATE_HZ="1", INCIDENT_RECORDING=str(recording).lower())
     try:
 
         def matched() -> bool:

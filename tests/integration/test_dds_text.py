@@ -58,6 +58,7 @@ def test_a_string_that_is_not_utf8_costs_only_its_own_sample(tmp_path: Path, stu
         "SAMPLE_RATE_HZ": "10",
         "FLUSH_INTERVAL_S": "0.2",
         "HEALTH_EVENT_INTERVAL_S": "0",
+        "INCIDENT_RECORDING": "false",  # /odom taken at the tick, not an incident's window
         **ros,
     }
     bridge = BridgeProcess(log, **settings).start()

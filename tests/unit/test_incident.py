@@ -248,6 +248,23 @@ def test_a_stop_keeps_the_open_incident_cut_short() -> None:
     assert rec.counts["cut_short"] == 1 and rec.close_now() == []
 
 
+def test_an_incident_stamped_on_an_unsynchronized_clock_says_so() -> None:
+    """As every event: a later clock step repairs what it says (docs/udm.md, "Time")."""
+    clock, synchronized = Clock(), [False]
+    rec = IncidentRecorder(
+        IncidentOptions(), IDENTITY, 1 << 20, clock, unsynchronized=lambda: not synchronized[0]
+    )
+    _, n = run(rec, clock, 5.0, rate_hz=10)
+    rec.mark("first")
+    built, n = run(rec, clock, 20.0, rate_hz=10, start_n=n)
+    assert [b.event.get("wall_clock") for b in built] == [{"synchronized": False}]
+    synchronized[0] = True
+    rec.mark("second")
+    built, _ = run(rec, clock, 40.0, rate_hz=10, start_n=n)
+    assert [b.event.get("wall_clock") for b in built] == [None]
+    assert all(check_event(b.event) for b in built)
+
+
 def test_nothing_is_kept_or_marked_while_recording_is_off() -> None:
     clock = Clock()
     rec = recorder(clock, enabled=False)

@@ -19,11 +19,16 @@ and ``take_latest`` deserialises it at the sample tick, so Python touches at mos
 message per topic per tick instead of every message (an IMU at 200 Hz); its age is
 the writer's stamp, bounded by the time since the previous take. Topics where every
 message counts (diagnostics, goals, delivery status) are delivered as they come.
+So are the state topics an incident's window needs at full rate, and its trigger
+topics (``SourceOptions.every_message``, from the INCIDENT_* settings; none when
+INCIDENT_RECORDING=false): read by a listener, keeping up to 100 samples, and never
+also taken at the tick; their QoS is still matched as a state stream's (best effort
+before their writers are known, so a best-effort sensor matches).
 The topics of ``TOPICS_EXTRA`` are read like state topics, but taken only when due
-(their ``rate_hz``), with types made from ROS 2 Jazzy's message definitions
-(``dds_dynamic.py``, which needs rosbags); one whose type is not given or not known,
-or when rosbags is not installed, is skipped, with the reason in the log and in
-``status``.
+(their ``rate_hz``; delivered as they come when named in ``every_message``), with
+types made from ROS 2 Jazzy's message definitions (``dds_dynamic.py``, which needs
+rosbags); one whose type is not given or not known, or when rosbags is not installed,
+is skipped, with the reason in the log and in ``status``.
 
 A sample that cannot be decoded (a string that is not UTF-8: cyclonedds decodes
 strictly) costs only itself: samples are taken one at a time, and that one is counted
@@ -58,7 +63,8 @@ GRAPH_CHECK_S = 1.0  # how often the domain's writers are looked at
 
 class DdsSource:
     """Readers on the robot's DDS domain; Cyclone's threads deliver every-message
-    topics, and the sampler takes the state topics at each tick."""
+    topics (and the state topics named in ``every_message``), and the sampler takes
+    the other state topics at each tick."""
 
     keeps_time = False
     clock = None
@@ -80,6 +86,7 @@ class DdsSource:
             self._options.dds_cyclonedds_uri,
             feed.on_unreadable,
             self._options.qos_overrides,
+            self._options.every_message,
         )
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:

@@ -1,7 +1,9 @@
 """The ``dds`` input's readers (``DdsReaders``): one per topic, on the robot's domain,
 matched to what the topic's writers offer by the ``ros`` input's QoS rules
 (``ingest.qos``), and read as the input's doc (``dds.py``) says (every-message topics by a listener,
-state topics at the sample tick, one sample at a time: ``take_each``).
+state topics at the sample tick, one sample at a time: ``take_each``; a state topic named
+in ``SourceOptions.every_message``, an incident's window or trigger topic, by a
+listener too, its QoS still matched as a state stream's).
 """
 
 from __future__ import annotations
@@ -46,22 +48,32 @@ class ReadTopic:
     topic: Any  # the cyclonedds Topic
     dds_name: str  # rt/...
     type_name: str  # the DDS type name, e.g. nav_msgs::msg::dds_::Odometry_
-    every_message: bool
+    every_message: bool  # the table's: every message counts (read reliably until matched)
     extra: bool
     choice: QosChoice
+    # a state stream delivered on every message all the same (an incident's window or
+    # trigger topic): read by a listener, its QoS matched as a state stream's
+    called_back: bool = False
     reader: Any = None
     publishers: int = 0
     qos_incompatible: int = 0
     emptied_at: float = 0.0  # monotonic s when its reader was last emptied (or made)
+
+    @property
+    def listened(self) -> bool:
+        """Delivered by a listener as each sample arrives, never taken at the tick."""
+        return self.every_message or self.called_back
 
 
 class DdsReaders:
     """A reader per enabled topic, matched to what the topic's writers offer by the
     ``ros`` input's rules (``ingest.qos``: reliable for the every-message topics until
     their writers are known, then what every writer can match; ``TOPIC_QOS``
-    overrides). Every-message topics go to ``on_message`` on Cyclone's listener
-    thread, as they arrive; the others are taken at the sample tick and returned
-    (``take_latest``), for the sampler to hand to the dispatcher."""
+    overrides). Every-message topics, and the state topics named in ``called_back``
+    (an incident's window and trigger topics, ``SourceOptions.every_message``), go to
+    ``on_message`` on Cyclone's listener thread, as they arrive; the others are taken
+    at the sample tick and returned (``take_latest``), for the sampler to hand to the
+    dispatcher."""
 
     def __init__(
         self,
@@ -73,6 +85,7 @@ class DdsReaders:
         cyclonedds_uri: str = "",
         on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable,
         overrides: Mapping[str, QosChoice] | None = None,
+        called_back: frozenset[str] = frozenset(),
     ) -> None:
         try:
             from cyclonedds.core import DDSException
@@ -91,6 +104,7 @@ class DdsReaders:
         self._on_message = on_message
         self._on_unreadable = on_unreadable
         self._overrides = dict(overrides or {})
+        self._called_back = called_back
         self._dds_error = DDSException
         self._invalid_sample = InvalidSample
         self._lock = threading.Lock()  # the tick's takes and the graph check's re-matching
@@ -123,19 +137,28 @@ class DdsReaders:
         dds_name = dds_topic_name(actual)
         topic = Topic(self.participant, dds_name, idl)
         choice = self._overrides.get(name) or before_publishers(every_message)
-        read = ReadTopic(name, topic, dds_name, idl.__idl_typename__, every_message, extra, choice)
+        read = ReadTopic(
+            name,
+            topic,
+            dds_name,
+            idl.__idl_typename__,
+            every_message,
+            extra,
+            choice,
+            called_back=name in self._called_back,
+        )
         self._topics[name] = read
         self._open(read, choice)
 
     def _open(self, read: ReadTopic, choice: QosChoice) -> None:
         """A reader for ``read`` asking for ``choice`` (which ``read`` then holds: a
         reader that could not be made is tried again at the next look): keep one
-        sample of a state topic, 100 of an every-message topic, those delivered by a
-        listener."""
+        sample of a state topic taken at the tick, 100 of a topic delivered by a
+        listener (an every-message topic, a state topic called back)."""
         from cyclonedds.core import Listener, Policy, Qos
         from cyclonedds.sub import DataReader
 
-        depth = READER_DEPTH if read.every_message else 1
+        depth = READER_DEPTH if read.listened else 1
         qos = Qos(
             Policy.Reliability.Reliable(max_blocking_time=0)
             if choice.reliable
@@ -146,7 +169,7 @@ class DdsReaders:
             Policy.History.KeepLast(depth),
         )
         listener = None
-        if read.every_message:
+        if read.listened:
 
             def deliver(reader: Any, name: str = read.name) -> None:
                 self._take(name, reader, READER_DEPTH, self._deliver)
@@ -206,7 +229,7 @@ class DdsReaders:
         held is handed over first."""
         with self._lock:
             old, read.reader = read.reader, None
-            if old is not None and read.every_message:
+            if old is not None and read.listened:
                 old.set_listener(None)  # no call of its listener runs after this returns
                 self._take(read.name, old, READER_DEPTH, self._deliver)
             elif old is not None:  # not at a tick: handed over at once
@@ -229,8 +252,8 @@ class DdsReaders:
         takes: list[Take] = []
         with self._lock:
             for read in self._topics.values():
-                if read.every_message or read.reader is None:
-                    continue
+                if read.listened or read.reader is None:
+                    continue  # delivered as they come, never also at the tick
                 if read.extra and not due(read.name):
                     continue  # left in Cyclone's cache (one sample), not deserialised
                 self._take_latest(read, read.reader, takes.append)
