@@ -10,9 +10,12 @@ a trigger beyond that is counted (``rate_limited``), not recorded.
 Time is the input's timeline, from the same clock as the builder's: a live input's
 monotonic clock for the window's arithmetic (a wall clock step cannot stretch or end a
 window) and its wall clock for stamps; a bag's time for both, so a replay gives the
-same incidents at any REPLAY_RATE. A window closes when the timeline passes its end:
-at the next reading or sample tick (``take_closed``), and at a stop (``close_now``:
-the incident is kept, marked ``cut_short``).
+same incidents at any REPLAY_RATE. A window closes at the first sample tick
+(``take_closed``) ``settle_s`` past its end, and at a stop (``close_now``: the
+incident is kept, marked ``cut_short`` if its end had not come). ``settle_s`` is for
+the live inputs, which take the window topics' messages at the tick: a message
+received before the end may reach the recorder a tick later, after one of another
+topic received after it; a bag's messages come in time order (0).
 
 Readings come on the ingest threads, marks from the CLI's poller or the ROS service,
 ``take_closed`` from the sample tick: one lock serialises them, and a closed incident
@@ -72,9 +75,12 @@ class IncidentRecorder:
         max_part_bytes: int,
         clock: Clock,
         unsynchronized: Callable[[], bool] | None = None,
+        settle_s: float = 0.0,
     ) -> None:
         """``unsynchronized`` says whether the wall clock that stamps incidents is not
-        synchronized now (None: the stamps are not this machine's, as a bag's)."""
+        synchronized now (None: the stamps are not this machine's, as a bag's);
+        ``settle_s``, how late a reading can come after one received later."""
+        self._settle_s = settle_s
         self.options = options
         self._unsynchronized = unsynchronized
         self._identity = identity
@@ -110,7 +116,7 @@ class IncidentRecorder:
                     )
             for trigger in self._rules.observe(topic, reading, at_s, wall_s):
                 self._fire(trigger)
-            self._advance(at_s)
+            self._forget(at_s)
 
     def mark(self, reason: str, at_wall_s: float | None = None) -> Marked:
         """A trigger by hand (``phytrace-edge mark``, the ``~/mark`` service), at
@@ -123,7 +129,7 @@ class IncidentRecorder:
         with self._lock:
             outcome = self._fire(trigger)
             opened = self._open
-            self._advance(now_s)
+            self._forget(now_s)
         if opened is None or outcome == "rate_limited":
             return Marked(outcome)
         return Marked(outcome, incident_id(self._identity, opened.trigger))
@@ -168,16 +174,22 @@ class IncidentRecorder:
             now_s = self._clock.monotonic()
             self._advance(now_s)
             if self._open is not None:
-                self._close(self._open, min(now_s, self._open.end_s), cut_short=True)
+                end_s = self._open.end_s
+                self._close(self._open, min(now_s, end_s), cut_short=now_s < end_s)
             closed, self._closed = self._closed, []
         return self._events(closed)
 
     def _advance(self, now_s: float) -> None:
+        """Close the open window if ``now_s`` is settled past its end."""
         current = self._open
-        if current is not None and now_s >= current.end_s:
+        if current is not None and now_s >= current.end_s + self._settle_s:
             self._close(current, current.end_s, cut_short=False)
-            current = None
-        horizon = now_s - self.options.before_s
+        self._forget(now_s)
+
+    def _forget(self, now_s: float) -> None:
+        """Let the ring's samples go that no window can want any more."""
+        horizon = now_s - self.options.before_s - self._settle_s
+        current = self._open
         self._ring.forget_before(horizon if current is None else min(horizon, current.start_s))
 
     def _close(self, current: _Open, end_s: float, cut_short: bool) -> None:

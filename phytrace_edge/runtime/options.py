@@ -132,8 +132,9 @@ def source_options(
     kind, _, bag_path = s.bridge_input.partition(":")
     domain_id, localhost_only = 0, False
     recorded = incident_options(s)
+    full_rate = frozenset(recorded.topics) if recorded.enabled else frozenset()
     every_message = (
-        frozenset(recorded.topics) | {c.topic for c in recorded.conditions}
+        frozenset(c.topic for c in recorded.conditions) - full_rate
         if recorded.enabled
         else frozenset()
     )
@@ -147,6 +148,7 @@ def source_options(
         },
         qos_overrides=s.topic_qos or {},
         every_message=every_message,
+        full_rate=full_rate,
         bag_path=bag_path,
         replay_rate=s.replay_rate,
         ros_args=tuple(ros_args),

@@ -76,8 +76,16 @@ def build_pipeline(s: Settings, source: Source, emit: Callable[[Built], None]) -
     unsynchronized = None if source.keeps_time else host_clock.unsynchronized
     clock = source.clock or SystemClock()  # one timeline for events and incidents
     builder = UDMBuilder(options.builder_options(s), clock, source.field_types, unsynchronized)
+    # a live input takes the window topics' messages at the tick: one received before a
+    # window's end can come a tick after one received later (a bag's come in order)
+    settle_s = 0.0 if source.keeps_time else max(1.0, 2.0 / s.sample_rate_hz)
     recorder = IncidentRecorder(
-        options.incident_options(s), builder.identity, s.batch_max_bytes, clock, unsynchronized
+        options.incident_options(s),
+        builder.identity,
+        s.batch_max_bytes,
+        clock,
+        unsynchronized,
+        settle_s=settle_s,
     )
 
     def on_reading(topic: str, reading: Reading, age_s: float) -> None:

@@ -1,8 +1,9 @@
 """The ``dds`` input and incident windows (issue 35), against real Cyclone DDS on a private
-domain confined to loopback: the window's topics (``SourceOptions.every_message``) are
-delivered on every message, by a listener, never only at the sample tick, and their
-QoS is still matched as a state stream's (a best-effort odometry writer matches); with
-INCIDENT_RECORDING=false they are taken at the tick as before.
+domain confined to loopback: every message of the window's topics
+(``SourceOptions.full_rate``) is delivered, all those waiting taken at the sample tick
+(not only the newest), and their QoS is still matched as a state stream's (a
+best-effort odometry writer matches); with INCIDENT_RECORDING=false only the newest is
+taken at the tick, as before.
 
 - ``phytrace-edge run --input dds`` in a process of its own, an odometry writer at
   50 Hz in this process, a /diagnostics ERROR or ``phytrace-edge mark``: the incident
@@ -218,7 +219,7 @@ TEMPERATURE_FIELDS = {
 
 
 @pytest.mark.parametrize("recording", [True, False], ids=["recording", "not-recording"])
-def test_window_topics_are_delivered_on_every_message_only_while_recording(
+def test_window_topics_deliver_every_message_only_while_recording(
     tmp_path: Path, recording: bool
 ) -> None:
     """Odometry and an extra topic (rate_hz=1), both window topics, each written 75

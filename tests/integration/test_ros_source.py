@@ -302,9 +302,10 @@ def test_state_streams_are_taken_at_the_tick_not_called_back(graph) -> None:
     assert g.events[-1]["location"]["local"]["x_m"] >= 48.0  # the newest at that tick
 
 
-def test_a_window_topic_is_called_back_on_every_message(graph) -> None:
+def test_a_window_topic_reaches_the_dispatcher_on_every_message(graph) -> None:
     """With the incident window kept (the default), odometry at 50 Hz reaches the
-    dispatcher on every message, and the tick's event still has the newest."""
+    dispatcher on every message (all those waiting, taken at the tick), and the tick's
+    event still has the newest."""
     g = graph(SAMPLE_RATE_HZ="5")
     odometry = g.robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
     g.run(GRAPH_CHECK_S + 0.1)

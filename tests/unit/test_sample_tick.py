@@ -17,6 +17,7 @@ from phytrace_edge.ingest.dispatch import Dispatcher, Take, TakenMessage, TakenU
 from phytrace_edge.ingest.generic import rosidl_field_types
 from phytrace_edge.ingest.sources.base import Feed, Finished
 from phytrace_edge.ingest.sources.ros import RosSource
+from phytrace_edge.ingest.sources.ros_graph import FULL_RATE_QUEUE_DEPTH
 from phytrace_edge.runtime import options, wiring
 from phytrace_edge.sim import mock_ros
 from phytrace_edge.sim.mock_ros import as_rclpy
@@ -150,8 +151,9 @@ def ros_input(request: pytest.FixtureRequest):
     context = mock_ros.Context(virtual_time=True)
     modules = as_rclpy.modules(context)
     modules["rclpy"].init()
-    # no incident window: the state streams are taken at the tick (with one, the
-    # window's topics are called back: test_a_window_topic_is_called_back_on_every_message)
+    # no incident window: the newest message of each state stream is taken at the tick
+    # (with one, every message of the window's topics:
+    # test_a_window_topic_gives_every_message_at_the_tick)
     env = {"BRIDGE_INPUT": "ros", "INCIDENT_RECORDING": request.param}
     settings = load_settings(env=env).settings
     source = RosSource(options.source_options(settings, {}), modules.__getitem__)
@@ -194,9 +196,11 @@ def test_the_ros_input_returns_what_it_takes_and_calls_nothing_back(ros_input) -
 
 
 @pytest.mark.parametrize("ros_input", ["true"], indirect=True)
-def test_a_window_topic_is_called_back_on_every_message(ros_input) -> None:
-    """While an incident window is kept (INCIDENT_RECORDING), its topics (/odom among
-    them) reach the feed on every message, and nothing is taken at the tick."""
+def test_a_window_topic_gives_every_message_at_the_tick(ros_input) -> None:
+    """While an incident window is kept (INCIDENT_RECORDING), every message of its
+    topics (/odom among them) is taken at the tick, oldest first, each with its own
+    age; none is called back (a callback costs rclpy's executor more than the
+    message)."""
     source, robot, spin, called_back = ros_input
     odometry = robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
     spin(0.5)
@@ -204,8 +208,36 @@ def test_a_window_topic_is_called_back_on_every_message(ros_input) -> None:
         odometry.publish(odom(x))
         spin(0.05)
     spin(0.3)
-    assert called_back == ["/odom"] * 3
-    assert list(source.before_tick()) == []
+    taken = list(source.before_tick())
+    assert [(t.topic, t.message.pose.pose.position.x) for t in taken] == [
+        ("/odom", 1.0),
+        ("/odom", 1.5),
+        ("/odom", 2.0),
+    ]
+    # received 50 ms apart; the newest 0.05 + 0.3 s of virtual time before the take
+    assert [round(t.age_s, 2) for t in taken] == [0.45, 0.4, 0.35]
+    assert called_back == []
+    assert list(source.before_tick()) == []  # taken once
+
+
+@pytest.mark.parametrize("ros_input", ["true"], indirect=True)
+def test_a_full_rate_queue_found_full_is_counted(ros_input) -> None:
+    """More messages between two ticks than a full-rate subscription keeps: the
+    oldest are replaced, the take gets the newest FULL_RATE_QUEUE_DEPTH, and
+    ``topic_stats`` counts the topic's queue as found full."""
+    source, robot, spin, _ = ros_input
+    odometry = robot.create_publisher(m.Odometry, "/odom", BEST_EFFORT)
+    spin(0.5)
+    published = FULL_RATE_QUEUE_DEPTH + 20
+    for x in range(published):
+        odometry.publish(odom(float(x)))
+    spin(0.05)
+    taken = list(source.before_tick())
+    assert [t.message.pose.pose.position.x for t in taken] == [
+        float(x) for x in range(published - FULL_RATE_QUEUE_DEPTH, published)
+    ]
+    assert source.topic_stats()["/odom"]["queue_full"] == 1
+    assert "queue_full" not in source.topic_stats()["/imu/data"]
 
 
 def test_the_sampler_imports_nothing_of_ingest() -> None:

@@ -38,9 +38,13 @@ class SourceOptions:
     # TOPICS_EXTRA: name -> (name subscribed on the robot, type or "" for the graph's)
     extra_topics: Mapping[str, tuple[str, str]] = field(default_factory=dict)
     qos_overrides: Mapping[str, QosChoice] = field(default_factory=dict)
-    # topics delivered on every message, never only taken at the tick: an incident's
-    # window topics and trigger topics (canonical or TOPICS_EXTRA names)
+    # topics delivered on every message as they come, never only taken at the tick: an
+    # incident's trigger topics (canonical or TOPICS_EXTRA names)
     every_message: frozenset[str] = frozenset()
+    # topics of which every message counts, but not at once: an incident's window
+    # topics, all their messages taken at the tick (the ros and dds inputs; the bag
+    # input delivers every message anyway)
+    full_rate: frozenset[str] = frozenset()
     bag_path: str = ""
     replay_rate: float = DEFAULT_REPLAY_RATE
     ros_args: tuple[str, ...] = ()  # after --ros-args: remaps, log levels, parameters

@@ -19,10 +19,12 @@ and ``take_latest`` deserialises it at the sample tick, so Python touches at mos
 message per topic per tick instead of every message (an IMU at 200 Hz); its age is
 the writer's stamp, bounded by the time since the previous take. Topics where every
 message counts (diagnostics, goals, delivery status) are delivered as they come.
-So are the state topics an incident's window needs at full rate, and its trigger
-topics (``SourceOptions.every_message``, from the INCIDENT_* settings; none when
-INCIDENT_RECORDING=false): read by a listener, keeping up to 100 samples, and never
-also taken at the tick; their QoS is still matched as a state stream's (best effort
+So are an incident's trigger topics (``SourceOptions.every_message``, from the
+INCIDENT_* settings; none when INCIDENT_RECORDING=false): read by a listener, keeping
+up to 100 samples, and never also taken at the tick. The state topics an incident's
+window needs at full rate (``SourceOptions.full_rate``) keep up to FULL_RATE_DEPTH
+samples, all taken at the tick, oldest first, each with its age: a listener's call
+costs more than the sample. Both still match their QoS as a state stream's (best effort
 before their writers are known, so a best-effort sensor matches).
 The topics of ``TOPICS_EXTRA`` are read like state topics, but taken only when due
 (their ``rate_hz``; delivered as they come when named in ``every_message``), with
@@ -64,7 +66,7 @@ GRAPH_CHECK_S = 1.0  # how often the domain's writers are looked at
 class DdsSource:
     """Readers on the robot's DDS domain; Cyclone's threads deliver every-message
     topics (and the state topics named in ``every_message``), and the sampler takes
-    the other state topics at each tick."""
+    the other state topics at each tick (all the samples of those in ``full_rate``)."""
 
     keeps_time = False
     clock = None
@@ -87,6 +89,7 @@ class DdsSource:
             feed.on_unreadable,
             self._options.qos_overrides,
             self._options.every_message,
+            self._options.full_rate,
         )
 
     def run(self, stop: threading.Event, beat: Callable[[], None]) -> None:

@@ -2,8 +2,9 @@
 matched to what the topic's writers offer by the ``ros`` input's QoS rules
 (``ingest.qos``), and read as the input's doc (``dds.py``) says (every-message topics by a listener,
 state topics at the sample tick, one sample at a time: ``take_each``; a state topic named
-in ``SourceOptions.every_message``, an incident's window or trigger topic, by a
-listener too, its QoS still matched as a state stream's).
+in ``SourceOptions.every_message``, an incident's trigger topic, by a listener too, its
+QoS still matched as a state stream's; one named in ``SourceOptions.full_rate``, an
+incident's window topic, at the tick, every sample since the last).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from phytrace_edge.ingest.dispatch import LOG_EVERY_S, Take, TakenMessage, Taken
 from phytrace_edge.ingest.qos import QosChoice, before_publishers, incompatible, matching_qos
 from phytrace_edge.ingest.sources.base import OnMessage, age_at_take
 from phytrace_edge.ingest.sources.dds_wire import (
+    FULL_RATE_DEPTH,
     READER_DEPTH,
     UNDECODABLE,
     dds_topic_name,
@@ -51,9 +53,12 @@ class ReadTopic:
     every_message: bool  # the table's: every message counts (read reliably until matched)
     extra: bool
     choice: QosChoice
-    # a state stream delivered on every message all the same (an incident's window or
-    # trigger topic): read by a listener, its QoS matched as a state stream's
+    # a state stream delivered on every message all the same (an incident's trigger
+    # topic): read by a listener, its QoS matched as a state stream's
     called_back: bool = False
+    # a state stream of which every sample counts (an incident's window topic): its
+    # reader keeps FULL_RATE_DEPTH, all taken at the tick
+    full_rate: bool = False
     reader: Any = None
     publishers: int = 0
     qos_incompatible: int = 0
@@ -70,10 +75,12 @@ class DdsReaders:
     ``ros`` input's rules (``ingest.qos``: reliable for the every-message topics until
     their writers are known, then what every writer can match; ``TOPIC_QOS``
     overrides). Every-message topics, and the state topics named in ``called_back``
-    (an incident's window and trigger topics, ``SourceOptions.every_message``), go to
+    (an incident's trigger topics, ``SourceOptions.every_message``), go to
     ``on_message`` on Cyclone's listener thread, as they arrive; the others are taken
     at the sample tick and returned (``take_latest``), for the sampler to hand to the
-    dispatcher."""
+    dispatcher: the newest sample of each, and every sample of those named in
+    ``full_rate`` (an incident's window topics: a listener's call costs more CPU than
+    the sample, docs/benchmarks.md)."""
 
     def __init__(
         self,
@@ -86,6 +93,7 @@ class DdsReaders:
         on_unreadable: Callable[[str, str, str], None] = _ignore_unreadable,
         overrides: Mapping[str, QosChoice] | None = None,
         called_back: frozenset[str] = frozenset(),
+        full_rate: frozenset[str] = frozenset(),
     ) -> None:
         try:
             from cyclonedds.core import DDSException
@@ -104,7 +112,9 @@ class DdsReaders:
         self._on_message = on_message
         self._on_unreadable = on_unreadable
         self._overrides = dict(overrides or {})
-        self._called_back = called_back
+        self._called_back = called_back - full_rate
+        self._full_rate = full_rate
+        self.queue_full: Counter[str] = Counter()
         self._dds_error = DDSException
         self._invalid_sample = InvalidSample
         self._lock = threading.Lock()  # the tick's takes and the graph check's re-matching
@@ -146,6 +156,7 @@ class DdsReaders:
             extra,
             choice,
             called_back=name in self._called_back,
+            full_rate=not every_message and name in self._full_rate,
         )
         self._topics[name] = read
         self._open(read, choice)
@@ -154,11 +165,12 @@ class DdsReaders:
         """A reader for ``read`` asking for ``choice`` (which ``read`` then holds: a
         reader that could not be made is tried again at the next look): keep one
         sample of a state topic taken at the tick, 100 of a topic delivered by a
-        listener (an every-message topic, a state topic called back)."""
+        listener (an every-message topic, a state topic called back), FULL_RATE_DEPTH of
+        a full-rate one."""
         from cyclonedds.core import Listener, Policy, Qos
         from cyclonedds.sub import DataReader
 
-        depth = READER_DEPTH if read.listened else 1
+        depth = FULL_RATE_DEPTH if read.full_rate else READER_DEPTH if read.listened else 1
         qos = Qos(
             Policy.Reliability.Reliable(max_blocking_time=0)
             if choice.reliable
@@ -233,7 +245,7 @@ class DdsReaders:
                 old.set_listener(None)  # no call of its listener runs after this returns
                 self._take(read.name, old, READER_DEPTH, self._deliver)
             elif old is not None:  # not at a tick: handed over at once
-                self._take_latest(read, old, self._deliver)
+                self._take_waiting(read, old, self._deliver)
             del old  # the last reference: Cyclone deletes the reader now, on this thread
             self._open(read, choice)
         log.info(
@@ -246,24 +258,43 @@ class DdsReaders:
 
     def take_latest(self, due: Callable[[str], bool] = lambda name: True) -> list[Take]:
         """The newest sample of each state topic, if one came since last time, with its
-        age (or, when it could not be decoded, why); an extra topic's only when it is
-        ``due`` (its rate_hz), so a large one sent once a second is not deserialised
-        at every tick. Returned, not handed over: the sampler dispatches them."""
+        age (or, when it could not be decoded, why); every sample of a full-rate one;
+        an extra topic's only when it is ``due`` (its rate_hz), so a large one sent
+        once a second is not deserialised at every tick. Returned, not handed over:
+        the sampler dispatches them."""
         takes: list[Take] = []
         with self._lock:
             for read in self._topics.values():
                 if read.listened or read.reader is None:
                     continue  # delivered as they come, never also at the tick
-                if read.extra and not due(read.name):
+                if read.extra and not read.full_rate and not due(read.name):
                     continue  # left in Cyclone's cache (one sample), not deserialised
-                self._take_latest(read, read.reader, takes.append)
+                self._take_waiting(read, read.reader, takes.append)
         return takes
 
-    def _take_latest(self, read: ReadTopic, reader: Any, put: Callable[[Take], None]) -> None:
-        """The one sample a state topic's ``reader`` keeps, with its age, to ``put``."""
+    def _take_waiting(self, read: ReadTopic, reader: Any, put: Callable[[Take], None]) -> None:
+        """What a state topic's ``reader`` keeps (one sample; all of a full-rate
+        topic's, oldest first), each with its age, to ``put``. A full-rate reader found
+        full may have lost its oldest: counted in ``queue_full``."""
         now = time.monotonic()
         waited_s, read.emptied_at = now - read.emptied_at, now
-        self._take(read.name, reader, 1, put, waited_s)
+        if not read.full_rate:
+            self._take(read.name, reader, 1, put, waited_s)
+            return
+        taken: list[Take] = []
+        self._take(read.name, reader, FULL_RATE_DEPTH, taken.append, waited_s)
+        if len(taken) >= FULL_RATE_DEPTH:
+            self.queue_full[read.name] += 1
+            if self.queue_full[read.name] == 1:
+                log.warning(
+                    "%s: %d samples waited for one tick, as many as are kept: older ones "
+                    "may have been lost (a faster topic than the incident window can keep "
+                    "at this SAMPLE_RATE_HZ)",
+                    read.name,
+                    FULL_RATE_DEPTH,
+                )
+        for take in taken:
+            put(take)
 
     def _take(
         self,
@@ -333,6 +364,7 @@ class DdsReaders:
                 "publishers": read.publishers,
                 "qos": read.choice.describe(),
                 "qos_incompatible": read.qos_incompatible,
+                **({"queue_full": self.queue_full[name]} if self.queue_full.get(name) else {}),
             }
             for name, read in list(self._topics.items())
         }

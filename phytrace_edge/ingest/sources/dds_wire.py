@@ -9,6 +9,9 @@ from collections.abc import Callable
 from typing import Any
 
 READER_DEPTH = 100
+# a full-rate reader's samples wait for the next tick: 2 s of a 500 Hz topic at 5 Hz
+# ticks is 200; the rest is room for a late tick
+FULL_RATE_DEPTH = 1000
 UNDECODABLE = "undecodable"  # the reject reason of a sample that cannot be decoded (as bag's)
 # Fast DDS announces XTypes type information that Cyclone DDS rejects ("invalid type
 # object"), and a reader whose writer's type cannot be resolved never matches: not one

@@ -2,10 +2,11 @@
 imports it (lazily: rclpy comes with ROS 2 or its wheels, and the core runs without).
 
 One node, ``phytrace_edge``: its executor runs the callbacks of the topics where every
-message counts (an incident's window topics among them, while recording), the graph
-checks, the parameter services and the ``~/mark`` service (``std_srvs/srv/Trigger``:
-an incident marked by hand); the state streams are taken at the sample tick
-(``ros_graph.taken_at_the_tick``).
+message counts as it comes (diagnostics, goals, an incident's trigger topics), the
+graph checks, the parameter services and the ``~/mark`` service
+(``std_srvs/srv/Trigger``: an incident marked by hand); the state streams are taken at
+the sample tick (``ros_graph.taken_at_the_tick``): the newest message of each, and
+every message of an incident's window topics, while recording.
 """
 
 from __future__ import annotations
@@ -165,6 +166,7 @@ class RosSource:
                 dict(self._options.topics),
                 dict(self._options.extra_topics),
                 self._options.every_message,
+                self._options.full_rate,
             ),
             feed.on_message,
             dict(self._options.qos_overrides),

@@ -23,6 +23,9 @@ log = logging.getLogger(__name__)
 
 SAMPLED_QUEUE_DEPTH = 5
 EVERY_MESSAGE_QUEUE_DEPTH = 100
+# a full-rate topic's messages wait in its subscription for the next tick: 2 s of a
+# 500 Hz topic at 5 Hz ticks is 200; the rest is room for a late tick
+FULL_RATE_QUEUE_DEPTH = 1000
 GRAPH_CHECK_S = 2.0  # how often new topics and new publishers are looked for
 
 
@@ -102,36 +105,55 @@ class Wanted:
     depth: int
     sampled: bool = False  # a state stream: only its latest message counts
     extra: bool = False  # a TOPICS_EXTRA topic: taken at the tick only when it is due
-    # a state stream called back on every message all the same: an incident's window
-    # or trigger topic (its QoS is still matched as a state stream's)
+    # a state stream called back on every message all the same: an incident's trigger
+    # topic (its QoS is still matched as a state stream's)
     called_back: bool = False
+    # a state stream of which every message counts, all of them taken at the tick (an
+    # incident's window topic): no callback per message, a deeper subscription instead
+    full_rate: bool = False
 
 
 def wanted_topics(
     topics: dict[str, str],
     extras: dict[str, tuple[str, str]] | None = None,
     every_message: frozenset[str] = frozenset(),
+    full_rate: frozenset[str] = frozenset(),
 ) -> dict[str, Wanted]:
     """The table's topics (canonical -> actual) and TOPICS_EXTRA's (name -> (actual,
-    type or "")); those in ``every_message`` are called back on every message."""
-    wanted = {
-        canonical: Wanted(
+    type or "")); those in ``every_message`` are called back on every message, those
+    in ``full_rate`` taken whole at the tick (a state stream's; otherwise as
+    ``every_message``)."""
+
+    def depth(called_back: bool, all_taken: bool) -> int:
+        if all_taken:
+            return FULL_RATE_QUEUE_DEPTH
+        return EVERY_MESSAGE_QUEUE_DEPTH if called_back else SAMPLED_QUEUE_DEPTH
+
+    wanted = {}
+    for canonical, actual in topics.items():
+        sampled = not TOPIC_BY_NAME[canonical].every_message
+        all_taken = sampled and canonical in full_rate
+        called_back = sampled and canonical in every_message and not all_taken
+        wanted[canonical] = Wanted(
             actual,
             TOPIC_BY_NAME[canonical].type_names,
-            EVERY_MESSAGE_QUEUE_DEPTH
-            if TOPIC_BY_NAME[canonical].every_message or canonical in every_message
-            else SAMPLED_QUEUE_DEPTH,
-            sampled=not TOPIC_BY_NAME[canonical].every_message,
-            called_back=canonical in every_message,
+            depth(not sampled or called_back, all_taken),
+            sampled=sampled,
+            called_back=called_back,
+            full_rate=all_taken,
         )
-        for canonical, actual in topics.items()
-    }
     for name, (actual, type_name) in (extras or {}).items():
         types = (type_name,) if type_name else ()
-        called_back = name in every_message
-        depth = EVERY_MESSAGE_QUEUE_DEPTH if called_back else SAMPLED_QUEUE_DEPTH
+        all_taken = name in full_rate
+        called_back = name in every_message and not all_taken
         wanted[name] = Wanted(
-            actual, types, depth, sampled=True, extra=True, called_back=called_back
+            actual,
+            types,
+            depth(called_back, all_taken),
+            sampled=True,
+            extra=True,
+            called_back=called_back,
+            full_rate=all_taken,
         )
     return wanted
 
@@ -150,7 +172,12 @@ class TopicSubscriber:
 
     State streams are taken at the sample tick when ``take_at_tick`` is set: their
     subscriptions sit in a callback group no executor runs (``taken_at_the_tick``), so
-    no Python runs for each of their messages.
+    no Python runs for each of their messages. A full-rate one (an incident's window
+    topic) keeps up to FULL_RATE_QUEUE_DEPTH messages, and the tick takes them all, in
+    order, each with its own reception stamp: rclpy's executor costs ~600 us of CPU a
+    message to call a callback, a take ~30 (docs/benchmarks.md, "Incident window").
+    A take that empties a full queue may have lost its oldest: counted in
+    ``queue_full`` by topic.
 
     ``refresh`` (at start and then periodically) subscribes every topic at once (while
     no publisher is known: ``qos.before_publishers``), and re-creates
@@ -188,6 +215,7 @@ class TopicSubscriber:
         self.subscribed: dict[str, Subscription] = {}
         self.publishers: dict[str, int] = dict.fromkeys(topics, 0)
         self.qos_incompatible: Counter[str] = Counter()
+        self.queue_full: Counter[str] = Counter()
         self.type_unknown: dict[str, str] = {}
 
     def refresh(self) -> None:
@@ -241,9 +269,8 @@ class TopicSubscriber:
                 )
                 continue
             if current is not None:
-                if self._is_taken(wanted):  # its newest message was not taken yet
-                    waiting = self._take(canonical, current.handle)
-                    kept += [TakenMessage(canonical, *waiting)] if waiting is not None else []
+                if self._is_taken(wanted):  # what waits in it was not taken yet
+                    kept += self._take(canonical, wanted, current.handle)
                 self._node.destroy_subscription(current.handle)
             self._emptied_at[canonical] = self._steady_s()
             self.subscribed[canonical] = Subscription(
@@ -268,6 +295,11 @@ class TopicSubscriber:
                 if canonical in self.subscribed
                 else None,
                 "qos_incompatible": self.qos_incompatible.get(canonical, 0),
+                **(
+                    {"queue_full": self.queue_full[canonical]}
+                    if self.queue_full.get(canonical)
+                    else {}
+                ),
                 **(
                     {"type_unknown": self.type_unknown[canonical]}
                     if canonical in self.type_unknown
@@ -294,31 +326,53 @@ class TopicSubscriber:
 
     def take_latest(self) -> list[TakenMessage]:
         """The newest message of each sampled topic, if one came since the last tick
-        (no executor runs their subscriptions), with its age; an extra topic's only
-        when it is due. Returned, not handed over: the sampler dispatches them."""
+        (no executor runs their subscriptions), with its age; every message of a
+        full-rate topic; an extra topic's only when it is due. Returned, not handed
+        over: the sampler dispatches them."""
         taken = []
         with self._lock:
             for canonical, wanted in self._topics.items():
                 current = self.subscribed.get(canonical)
                 if current is None or not self._is_taken(wanted):
                     continue
-                if wanted.extra and not self._due(canonical):
+                if wanted.extra and not wanted.full_rate and not self._due(canonical):
                     continue  # left in the subscription (keep last 1), not deserialised
-                waiting = self._take(canonical, current.handle)
-                if waiting is not None:
-                    taken.append(TakenMessage(canonical, *waiting))
+                taken += self._take(canonical, wanted, current.handle)
         return taken
 
-    def _take(self, canonical: str, subscription: Any) -> tuple[Any, float] | None:
-        """The message waiting on a taken subscription and its age, or None."""
+    def _take(self, canonical: str, wanted: Wanted, subscription: Any) -> list[TakenMessage]:
+        """What waits on a taken subscription, oldest first, each with its age: the
+        newest message (the subscription keeps one), or all of a full-rate topic's."""
         now_s = self._steady_s()
         waited_s = now_s - self._emptied_at.get(canonical, now_s)
         self._emptied_at[canonical] = now_s
-        taken = self._api.take(subscription)
-        if taken is None:
-            return None
+        waiting = []
+        for _ in range(FULL_RATE_QUEUE_DEPTH if wanted.full_rate else 1):
+            taken = self._api.take(subscription)
+            if taken is None:
+                break
+            waiting.append(taken)
+        if wanted.full_rate and len(waiting) >= FULL_RATE_QUEUE_DEPTH:
+            self._count_full(canonical)
         now_ns = int(self._system.now().nanoseconds)
-        return taken.message, age_at_take(taken.received_ns, now_ns, waited_s)
+        return [
+            TakenMessage(canonical, t.message, age_at_take(t.received_ns, now_ns, waited_s))
+            for t in waiting
+        ]
+
+    def _count_full(self, canonical: str) -> None:
+        """A full-rate subscription found full: messages beyond its depth may have been
+        replaced before this take (its topic publishes faster than it can be kept
+        between two ticks)."""
+        self.queue_full[canonical] += 1
+        if self.queue_full[canonical] == 1:
+            log.warning(
+                "%s: %d messages waited for one tick, as many as are kept: older ones may "
+                "have been lost (a faster topic than the incident window can keep at "
+                "this SAMPLE_RATE_HZ)",
+                canonical,
+                FULL_RATE_QUEUE_DEPTH,
+            )
 
     def _steady_s(self) -> float:
         return float(self._steady.now().nanoseconds) / 1e9
@@ -333,7 +387,7 @@ class TopicSubscriber:
         qos = self._api.qos
         sampled = self._is_taken(wanted)
         profile = qos.QoSProfile(
-            depth=1 if sampled else wanted.depth,
+            depth=1 if sampled and not wanted.full_rate else wanted.depth,
             reliability=qos.ReliabilityPolicy.RELIABLE
             if choice.reliable
             else qos.ReliabilityPolicy.BEST_EFFORT,
