@@ -25,8 +25,16 @@ def yaw_rate_of(n: int) -> float:
     return float(np.radians(n % 90))
 
 
-def write_incident_bag(path: Path, seconds: int = 120, error_at_s: int = 60) -> dict[str, int]:
-    """Write the bag at ``path`` (a directory); messages per topic."""
+def write_incident_bag(
+    path: Path,
+    seconds: int = 120,
+    error_at_s: int = 60,
+    odom_hz: int = ODOM_HZ,
+    imu_hz: int = IMU_HZ,
+    diagnostics_every_s: int = 1,
+) -> dict[str, int]:
+    """Write the bag at ``path`` (a directory); messages per topic. Slower rates make a
+    bag of hours small (the long outage's)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -77,9 +85,11 @@ def write_incident_bag(path: Path, seconds: int = 120, error_at_s: int = 60) -> 
 
     records: list[tuple[int, str, Any]] = []
     start_ns = BAG_START_S * 10**9
-    records += [(start_ns + n * 10**9 // ODOM_HZ, "/odom", n) for n in range(seconds * ODOM_HZ)]
-    records += [(start_ns + n * 10**9 // IMU_HZ, "/imu/data", n) for n in range(seconds * IMU_HZ)]
-    records += [(start_ns + s * 10**9, "/diagnostics", s) for s in range(seconds)]
+    records += [(start_ns + n * 10**9 // odom_hz, "/odom", n) for n in range(seconds * odom_hz)]
+    records += [(start_ns + n * 10**9 // imu_hz, "/imu/data", n) for n in range(seconds * imu_hz)]
+    records += [
+        (start_ns + s * 10**9, "/diagnostics", s) for s in range(0, seconds, diagnostics_every_s)
+    ]
     records.sort(key=lambda record: (record[0], record[1]))
     build = {"/odom": odometry, "/imu/data": imu, "/diagnostics": diagnostics}
     types = {

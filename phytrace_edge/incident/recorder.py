@@ -11,7 +11,7 @@ Time is the input's timeline, from the same clock as the builder's: a live input
 monotonic clock for the window's arithmetic (a wall clock step cannot stretch or end a
 window) and its wall clock for stamps; a bag's time for both, so a replay gives the
 same incidents at any REPLAY_RATE. A window closes at the first sample tick
-(``take_closed``) ``settle_s`` past its end, and at a stop (``close_now``: the
+(``take_closed``) more than ``settle_s`` past its end, and at a stop (``close_now``: the
 incident is kept, marked ``cut_short`` if its end had not come). ``settle_s`` is for
 the live inputs, which take the window topics' messages at the tick: a message
 received before the end may reach the recorder a tick later, after one of another
@@ -180,9 +180,10 @@ class IncidentRecorder:
         return self._events(closed)
 
     def _advance(self, now_s: float) -> None:
-        """Close the open window if ``now_s`` is settled past its end."""
+        """Close the open window once ``now_s`` is settled past its end (strictly: a
+        reading received at the very end is in it)."""
         current = self._open
-        if current is not None and now_s >= current.end_s + self._settle_s:
+        if current is not None and now_s > current.end_s + self._settle_s:
             self._close(current, current.end_s, cut_short=False)
         self._forget(now_s)
 

@@ -88,13 +88,13 @@ def check_the_incident(events: list[dict[str, Any]]) -> list[dict[str, Any]]:
     odom = joined(parts, "/odom")
     times = [bag_seconds(s["t"]) for s in odom]
     assert times == sorted(times) and times[0] == pytest.approx(30.0, abs=1e-6)
-    assert times[-1] >= 69.98 and len(odom) / (times[-1] - times[0]) >= 45
+    assert times[-1] == pytest.approx(70.0, abs=1e-6) and len(odom) / 40 >= 45
     # message n of /odom is at n/50 s: its speed says which it was
     for sample, at in zip(odom, times, strict=True):
         n = round(at * ODOM_HZ)
         assert sample["linear_velocity"]["x_mps"] == speed_of(n), (at, sample)
     imu = joined(parts, "/imu/data")
-    assert len(imu) == 4000  # [30 s, 70 s) at 100 Hz
+    assert len(imu) == 4001  # [30 s, 70 s] at 100 Hz, both ends
     for k in (0, 123, 3999):  # message n turns at n % 90 degrees a second
         assert imu[k]["imu"]["angular_velocity_dps"]["z"] == pytest.approx((3000 + k) % 90)
     return parts
@@ -176,3 +176,59 @@ def run_the_outage(bridge: BridgeProcess, stub: StubProcess, bag: Path, queue: P
     assert Counter(e["event_id"] for e in events if e["event_type"] == "incident") == {
         p["event_id"]: 1 for p in parts
     }
+
+
+@pytest.mark.paced
+@pytest.mark.timeout(400)
+def test_an_incident_in_the_third_hour_of_an_outage_is_sent_first(tmp_path: Path) -> None:
+    """Three hours of a robot (bag time, replayed in about a minute at REPLAY_RATE 180)
+    with PhyCloud down throughout and a queue small enough that the oldest hours are
+    thinned, a bumper ERROR at 2 h 30 min. When PhyCloud comes back, the incident's
+    parts are the first events it receives, before the first hour's backlog, and the
+    incident is whole: every /odom message of its window, as published."""
+    bag = tmp_path / "three-hours"
+    hours, error_at_s, odom_hz = 3, 9000, 2
+    counts = write_incident_bag(
+        bag, hours * 3600, error_at_s, odom_hz=odom_hz, imu_hz=1, diagnostics_every_s=10
+    )
+    assert counts == {"/odom": 21600, "/imu/data": 10800, "/diagnostics": 1080}
+    stub = StubProcess(tmp_path / "stub.db")  # its port is chosen; nothing listens yet
+    queue = tmp_path / "q.db"
+    out = replay(
+        bag,
+        queue,
+        stub.endpoint,
+        "180",
+        SAMPLE_RATE_HZ="1",
+        QUEUE_MAX_EVENTS="2000",  # of 10,800 periodic events
+        QUEUE_ON_FULL="thin",
+    )
+    assert "still queued" in out  # PhyCloud is down: everything waits
+    _, before = status_json(QUEUE_PATH=str(queue))
+    assert before["drops"].get("thinned", 0) > 0, before["drops"]
+    stub.start()
+    try:
+        drained = run_cli(
+            "drain", "--timeout", "120", QUEUE_PATH=str(queue), PHYCLOUD_ENDPOINT=stub.endpoint
+        )
+        assert drained.returncode == 0, drained.stderr
+        events = stub.events()
+    finally:
+        stub.stop()
+    (parts,) = incidents(events).values()
+    assert [e["event_id"] for e in events[: len(parts)]] == [p["event_id"] for p in parts]
+    incident = parts[0]["incident"]
+    assert bag_seconds(incident["trigger"]["at"]) == error_at_s
+    assert bag_seconds(incident["window"]["start"]) == error_at_s - 30
+    assert bag_seconds(incident["window"]["end"]) == error_at_s + 10
+    odom = joined(parts, "/odom")
+    times = [bag_seconds(s["t"]) for s in odom]
+    assert times == [error_at_s - 30 + k / odom_hz for k in range(40 * odom_hz + 1)]
+    for sample, at in zip(odom, times, strict=True):
+        assert sample["linear_velocity"]["x_mps"] == speed_of(round(at * odom_hz)), at
+    first_hour = [
+        e
+        for e in events[len(parts) :]
+        if e["event_type"] == "telemetry.periodic" and bag_seconds(e["captured_at"]) < 3600
+    ]
+    assert 0 < len(first_hour) < 3600  # there, thinned, and after the incident

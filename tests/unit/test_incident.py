@@ -135,8 +135,8 @@ def test_parts_fit_the_request_limit_and_join_back_into_the_window() -> None:
     assert len({e["incident"]["id"] for e in events}) == 1
     assert len({e["event_id"] for e in events}) == len(events)
     seqs = [s["seq"] for s in joined(events)["/odom"]]
-    # [10 s, 50 s] at 100 Hz; the one at exactly 50 s comes after the tick closed it
-    assert seqs == list(range(1000, 5000))
+    # [10 s, 50 s] at 100 Hz, both ends: a window closes only once time is past its end
+    assert seqs == list(range(1000, 5001))
 
 
 def test_the_same_incident_gets_the_same_ids() -> None:
