@@ -5,9 +5,10 @@ against the UDM schema, stores new events (deduplicated by event_id) and answers
 with counts. Fault injection (latency, errors, Retry-After, dropped connections)
 applies to POST /api/v1/events only.
 
-GET /incidents and GET /incidents/{id} are the live page's view of ``incident``
-events (UDM 1.3.0), put together from their parts; like ``/`` and ``/healthz`` they are
-the stub's own, not PhyCloud's API (not in docs/phycloud-openapi.yaml).
+GET /api/v1/incidents and GET /api/v1/incidents/{id} are the live page's view of
+``incident`` events (UDM 1.3.0), put together from their parts; like GET /api/v1/robots
+they are the stub's own, not PhyCloud's (``x-stub-only`` in docs/phycloud-openapi.yaml).
+``/`` and ``/healthz`` are the stub's too, and not in the document.
 """
 
 from __future__ import annotations
@@ -37,8 +38,8 @@ log = logging.getLogger(__name__)
 MAX_BODY_BYTES = 10 * 1024 * 1024
 MAX_DECODED_BYTES = 64 * 1024 * 1024
 MAX_EVENTS = 10_000
-MAX_INCIDENTS = 1000  # in one answer of GET /incidents
-MAX_TOPICS = 256  # named in one GET /incidents/{id} (as many as an incident may hold)
+MAX_INCIDENTS = 1000  # in one answer of GET /api/v1/incidents
+MAX_TOPICS = 256  # named in one GET /api/v1/incidents/{id} (as many as an incident holds)
 
 
 class DroppedConnection(Exception):
@@ -241,12 +242,12 @@ def create_app(stub: Stub) -> Starlette:
         routes=[
             Route("/", stub.page),
             Route("/healthz", stub.health),
-            Route("/incidents", stub.get_incidents),
-            Route("/incidents/{incident_id}", stub.get_incident),
             Route("/api/v1/events", stub.post_events, methods=["POST"]),
             Route("/api/v1/events", stub.get_events, methods=["GET"]),
             Route("/api/v1/stats", stub.get_stats),
             Route("/api/v1/robots", stub.get_robots),
+            Route("/api/v1/incidents", stub.get_incidents),
+            Route("/api/v1/incidents/{incident_id}", stub.get_incident),
             Route("/api/v1/faults", stub.get_faults, methods=["GET"]),
             Route("/api/v1/faults", stub.put_faults, methods=["PUT"]),
         ],

@@ -1,7 +1,8 @@
-"""The stub's incidents (GET /incidents, GET /incidents/{id}): ``incident`` events
-(UDM 1.3.0) posted as the bridge posts them, put together from their parts. In
-process (the app on httpx's ASGI transport); the page drawing them is in
-test_stub_page.py."""
+"""The stub's incidents (GET /api/v1/incidents, GET /api/v1/incidents/{id}):
+``incident`` events (UDM 1.3.0) posted as the bridge posts them, put together from
+their parts. In process (the app on httpx's ASGI transport); the page drawing them is
+in test_stub_page.py, their answers against docs/phycloud-openapi.yaml in
+test_openapi_contract.py."""
 
 from __future__ import annotations
 
@@ -115,7 +116,7 @@ def test_parts_join_into_the_window_and_missing_parts_are_named(client: Client) 
     client.post([events[2]])  # the last part first, the middle one not yet
     client.post([events[0]])
 
-    listed = client.get("/incidents").json()["incidents"]
+    listed = client.get("/api/v1/incidents").json()["incidents"]
     assert len(listed) == 1
     entry = listed[0]
     assert entry["id"] == ident and entry["source_id"] == "amr-7"
@@ -131,32 +132,34 @@ def test_parts_join_into_the_window_and_missing_parts_are_named(client: Client) 
     first_of_3 = min(s["t"] for items in events[2]["incident"]["samples"].values() for s in items)
     assert entry["gaps"] == [{"parts": [2], "from": last_of_1, "to": first_of_3}]
 
-    one = client.get(f"/incidents/{ident}").json()
+    one = client.get(f"/api/v1/incidents/{ident}").json()
     assert one["samples"] == got, "parts 1 and 3 joined in time order"
     assert {k: v for k, v in one.items() if k != "samples"} == entry
 
     # the missing part arrives, and part 1 again (a replay: taken once)
     answer = client.post([events[1], events[0]])
     assert (answer["accepted"], answer["duplicates"]) == (1, 1)
-    entry = client.get("/incidents").json()["incidents"][0]
+    entry = client.get("/api/v1/incidents").json()["incidents"][0]
     assert (entry["parts_received"], entry["missing_parts"], entry["complete"]) == (3, [], True)
     assert entry["gaps"] == []
     window = whole(samples)
     assert entry["sample_counts"] == {topic: len(window[topic]) for topic in TOPICS}
-    one = client.get(f"/incidents/{ident}").json()
+    one = client.get(f"/api/v1/incidents/{ident}").json()
     assert one["samples"] == window == joined(events), "the whole window, per topic"
 
-    some = client.request("GET", f"/incidents/{ident}?topic=/odom&topic=/battery_state").json()
+    some = client.request(
+        "GET", f"/api/v1/incidents/{ident}?topic=/odom&topic=/battery_state"
+    ).json()
     assert some["samples"] == {t: window[t] for t in ("/battery_state", "/odom")}
 
 
 def test_optional_fields_and_a_single_part(client: Client) -> None:
     events, samples = incident(parts=1, triggers=2, dropped={"/imu/data": 12}, cut_short=True)
     client.post(events)
-    entry = client.get("/incidents").json()["incidents"][0]
+    entry = client.get("/api/v1/incidents").json()["incidents"][0]
     assert (entry["parts"], entry["parts_received"], entry["complete"]) == (1, 1, True)
     assert (entry["triggers"], entry["dropped"], entry["cut_short"]) == (2, {"/imu/data": 12}, True)
-    assert client.get(f"/incidents/{entry['id']}").json()["samples"] == whole(samples)
+    assert client.get(f"/api/v1/incidents/{entry['id']}").json()["samples"] == whole(samples)
 
 
 def test_newest_first_limit_and_by_robot(client: Client) -> None:
@@ -165,26 +168,31 @@ def test_newest_first_limit_and_by_robot(client: Client) -> None:
     newest, _ = incident("amr-7", START + 1200)
     client.post(newer + newest + older)  # arrival order is not the order of the list
     ids = [e[0]["incident"]["id"] for e in (newest, newer, older)]
-    assert [i["id"] for i in client.get("/incidents").json()["incidents"]] == ids
-    assert [i["id"] for i in client.get("/incidents", limit=1).json()["incidents"]] == ids[:1]
-    by_robot = client.get("/incidents", source_id="amr-7").json()["incidents"]
+    assert [i["id"] for i in client.get("/api/v1/incidents").json()["incidents"]] == ids
+    assert [i["id"] for i in client.get("/api/v1/incidents", limit=1).json()["incidents"]] == ids[
+        :1
+    ]
+    by_robot = client.get("/api/v1/incidents", source_id="amr-7").json()["incidents"]
     assert [i["id"] for i in by_robot] == [ids[0], ids[2]]
-    assert client.get("/incidents", source_id="amr-9").json() == {"incidents": []}
+    assert client.get("/api/v1/incidents", source_id="amr-9").json() == {"incidents": []}
 
 
 def test_unknown_incidents_and_bad_requests(client: Client) -> None:
     events, _ = incident()
     client.post(events)
-    unknown = client.get("/incidents/01a21991-7bb0-7a37-97e1-cb3e9e6a3b9f")
+    unknown = client.get("/api/v1/incidents/01a21991-7bb0-7a37-97e1-cb3e9e6a3b9f")
     assert unknown.status_code == 404 and "no incident" in unknown.json()["error"]
-    assert client.get("/incidents/nonsense").status_code == 404
+    assert client.get("/api/v1/incidents/nonsense").status_code == 404
     for limit in ("0", "1001", "x"):
-        bad = client.get("/incidents", limit=limit)
+        bad = client.get("/api/v1/incidents", limit=limit)
         assert bad.status_code == 400 and "limit" in bad.json()["error"]
     too_many = "&".join(f"topic=/t{i}" for i in range(257))
     ident = events[0]["incident"]["id"]
-    assert client.request("GET", f"/incidents/{ident}?{too_many}").status_code == 400
-    assert client.get("/incidents", limit="1000").status_code == 200
+    assert client.request("GET", f"/api/v1/incidents/{ident}?{too_many}").status_code == 400
+    assert client.get("/api/v1/incidents", limit="1000").status_code == 200
+    # under /api/v1/ only: the paths at the root are gone
+    assert client.get("/incidents").status_code == 404
+    assert client.get(f"/incidents/{ident}").status_code == 404
 
 
 def test_an_incident_over_the_bound_is_refused(
@@ -195,9 +203,9 @@ def test_an_incident_over_the_bound_is_refused(
     ident = events[0]["incident"]["id"]
     battery = len(orjson.dumps(whole(samples)["/battery_state"]))
     monkeypatch.setattr(stub_store, "MAX_INCIDENT_BYTES", battery + 100)
-    too_large = client.get(f"/incidents/{ident}")
+    too_large = client.get(f"/api/v1/incidents/{ident}")
     assert too_large.status_code == 413 and "fewer topics" in too_large.json()["error"]
-    small = client.get(f"/incidents/{ident}", topic="/battery_state")
+    small = client.get(f"/api/v1/incidents/{ident}", topic="/battery_state")
     assert small.status_code == 200 and list(small.json()["samples"]) == ["/battery_state"]
 
 
@@ -206,7 +214,7 @@ def test_incidents_are_kept_and_noted_for_an_older_record(tmp_path: Path) -> Non
     events, samples = incident()
     first = Client(stub_store_path)
     first.post(events[:2])
-    before = first.get("/incidents").json()
+    before = first.get("/api/v1/incidents").json()
     entry = before["incidents"][0]
     assert (entry["parts"], entry["missing_parts"]) == (3, [3]), "the last part is missing"
     last_of_2 = max(s["t"] for items in events[1]["incident"]["samples"].values() for s in items)
@@ -214,15 +222,15 @@ def test_incidents_are_kept_and_noted_for_an_older_record(tmp_path: Path) -> Non
     first.store.close()
 
     again = Client(stub_store_path)  # a restarted stub keeps its record
-    assert again.get("/incidents").json() == before
+    assert again.get("/api/v1/incidents").json() == before
     # a record kept before incidents were noted beside the events: noted at open
     again.store.db.execute("DROP TABLE incident_parts")
     again.store.close()
     older = Client(stub_store_path)
     try:
-        assert older.get("/incidents").json() == before
+        assert older.get("/api/v1/incidents").json() == before
         older.post(events[2:])
         ident = events[0]["incident"]["id"]
-        assert older.get(f"/incidents/{ident}").json()["samples"] == whole(samples)
+        assert older.get(f"/api/v1/incidents/{ident}").json()["samples"] == whole(samples)
     finally:
         older.store.close()
