@@ -21,7 +21,6 @@ from typing import Any
 import orjson
 
 from phytrace_edge.builder.envelope import envelope
-from phytrace_edge.incident.ring import Sample
 from phytrace_edge.incident.triggers import Trigger
 from phytrace_edge.udm.event import format_timestamp, format_timestamp_us, new_event_id
 from phytrace_edge.udm.types import (
@@ -35,6 +34,16 @@ from phytrace_edge.udm.types import (
 EVENT_TYPE_INCIDENT = "incident"
 PART_HEADROOM_BYTES = 4096  # the envelope, trigger and window of a part, and then some
 T_FIELD_BYTES = len(b'"t":"2025-01-15T14:23:01.042315Z",')
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One sample of an incident: its topic, when it was received (on the wall clock as
+    it is at the close, docs/udm.md) and its reading's JSON."""
+
+    topic: str
+    wall_s: float
+    json: bytes
 
 
 @dataclass(frozen=True)

@@ -32,8 +32,8 @@ from typing import Any, Literal, Protocol
 
 from phytrace_edge.incident.figures import IncidentFigures
 from phytrace_edge.incident.options import IncidentOptions
-from phytrace_edge.incident.parts import ClosedIncident, incident_events, incident_id
-from phytrace_edge.incident.ring import Sample, WindowRing
+from phytrace_edge.incident.parts import ClosedIncident, Sample, incident_events, incident_id
+from phytrace_edge.incident.ring import WindowRing
 from phytrace_edge.incident.triggers import Trigger, TriggerRules, shortened
 from phytrace_edge.udm.types import Built, UdmIdentity
 
@@ -109,7 +109,7 @@ class IncidentRecorder:
         wall_s = self._clock.wall() - age_s
         with self._lock:
             if topic in self.window_topics:
-                evicted = self._ring.add(topic, reading, at_s, wall_s)
+                evicted = self._ring.add(topic, reading, at_s)
                 if evicted and self._open is not None:
                     self._open.dropped.update(
                         s.topic for s in evicted if s.at_s >= self._open.start_s
@@ -200,7 +200,7 @@ class IncidentRecorder:
         agree with the events queued beside it (repaired as they are, docs/udm.md)."""
         offset = self._clock.wall() - self._clock.monotonic()
         samples = [
-            Sample(s.topic, s.at_s, offset + s.at_s, s.json)
+            Sample(s.topic, offset + s.at_s, s.json)
             for s in self._ring.between(current.start_s, end_s)
         ]
         self._closed.append(

@@ -20,18 +20,17 @@ from typing import Any
 
 import orjson
 
-SAMPLE_OVERHEAD_BYTES = 240  # the Sample, its bytes object and the deque's slot (measured)
+SAMPLE_OVERHEAD_BYTES = 240  # the Kept, its bytes object and the deque's slot (measured)
 
 
 @dataclass(frozen=True)
-class Sample:
-    """One reading of one topic: when it was received on the input's timeline
-    (``at_s``: monotonic, for the window's arithmetic; ``wall_s``: its stamp) and its
-    JSON."""
+class Kept:
+    """One reading of one topic: when it was received on the input's timeline (``at_s``,
+    monotonic: the window's arithmetic; its wall-clock stamp is made when an incident
+    closes, ``parts.Sample``) and its JSON."""
 
     topic: str
     at_s: float
-    wall_s: float
     json: bytes
 
     @property
@@ -44,22 +43,20 @@ class WindowRing:
 
     def __init__(self, max_bytes: int) -> None:
         self.max_bytes = max_bytes
-        self._samples: deque[Sample] = deque()
+        self._samples: deque[Kept] = deque()
         self.bytes = 0
         self.dropped: Counter[str] = Counter()  # by topic: pushed out by the byte bound
 
     def __len__(self) -> int:
         return len(self._samples)
 
-    def add(
-        self, topic: str, reading: Mapping[str, Any], at_s: float, wall_s: float
-    ) -> tuple[Sample, ...]:
+    def add(self, topic: str, reading: Mapping[str, Any], at_s: float) -> tuple[Kept, ...]:
         """Keep ``reading``; beyond the byte bound the oldest samples go, counted, and
         are returned (usually none)."""
         # a copy: the bytes orjson returns keep its whole working buffer (4 KiB) alive
         # behind a few hundred bytes of JSON, which made a full 16 MiB ring 192 MiB of RSS
         # (docs/benchmarks.md, "Incident window")
-        sample = Sample(topic, at_s, wall_s, bytes(memoryview(orjson.dumps(reading))))
+        sample = Kept(topic, at_s, bytes(memoryview(orjson.dumps(reading))))
         self._samples.append(sample)
         self.bytes += sample.size
         if self.bytes <= self.max_bytes:
@@ -77,6 +74,6 @@ class WindowRing:
         while self._samples and self._samples[0].at_s < horizon_s:
             self.bytes -= self._samples.popleft().size
 
-    def between(self, start_s: float, end_s: float) -> Iterator[Sample]:
+    def between(self, start_s: float, end_s: float) -> Iterator[Kept]:
         """The samples received in [start_s, end_s], oldest first."""
         return (s for s in self._samples if start_s <= s.at_s <= end_s)

@@ -21,8 +21,12 @@ from jsonschema import Draft202012Validator
 from openapi_spec_validator import validate
 
 from phytrace_edge import run_simulation
-from phytrace_edge.incident.parts import PART_HEADROOM_BYTES, ClosedIncident, incident_events
-from phytrace_edge.incident.ring import Sample
+from phytrace_edge.incident.parts import (
+    PART_HEADROOM_BYTES,
+    ClosedIncident,
+    Sample,
+    incident_events,
+)
 from phytrace_edge.incident.triggers import Trigger
 from phytrace_edge.stub import store as stub_store
 from phytrace_edge.stub.app import Stub, create_app
@@ -66,12 +70,12 @@ def incident_parts(source_id: str, trigger: Trigger, **closed: Any) -> list[dict
     start = trigger.wall_s - 1.0
     samples = []
     for i in range(60):
-        at, wall = trigger.at_s - 1.0 + i * 0.05, start + i * 0.05
+        wall = start + i * 0.05
         odom = {"linear_velocity": {"x_mps": 0.01 * i, "y_mps": 0.2, "z_mps": 0.0}}
-        samples.append(Sample("/odom", at, wall, orjson.dumps(odom)))
+        samples.append(Sample("/odom", wall, orjson.dumps(odom)))
         if i % 10 == 0:
             battery = {"battery": {"state_of_charge_pct": 80 - i / 100}}
-            samples.append(Sample("/battery_state", at, wall + 0.001, orjson.dumps(battery)))
+            samples.append(Sample("/battery_state", wall + 0.001, orjson.dumps(battery)))
     window = ClosedIncident(
         trigger, trigger.at_s - 1.0, trigger.at_s + 2.0, start, start + 3.0, samples, **closed
     )

@@ -14,8 +14,7 @@ import httpx
 import orjson
 import pytest
 
-from phytrace_edge.incident.parts import ClosedIncident, incident_events
-from phytrace_edge.incident.ring import Sample
+from phytrace_edge.incident.parts import ClosedIncident, Sample, incident_events
 from phytrace_edge.incident.triggers import Trigger
 from phytrace_edge.stub import store as stub_store
 from phytrace_edge.stub.app import Stub, create_app
@@ -31,16 +30,16 @@ def samples_of(start: float, seconds: float = 6.0) -> list[Sample]:
     """/odom and /imu/data at 20 Hz and /battery_state at 2 Hz, oldest first."""
     out = []
     for i in range(int(seconds * 20)):
-        wall, at = start + i * 0.05, 1000.0 + i * 0.05
+        wall = start + i * 0.05
         moving = {"x_mps": 0.01 * i, "y_mps": 0.2, "z_mps": 0.0}
         turning = {"roll_dps": 0.0, "pitch_dps": 0.0, "yaw_dps": float(i % 7)}
         odom = {"linear_velocity": moving, "angular_velocity": turning, "local": {"x_m": i}}
         imu = {"imu": {"angular_velocity_dps": {"x": 0.0, "y": 0.0, "z": float(i % 5)}}}
-        out.append(Sample("/odom", at, wall, orjson.dumps(odom)))
-        out.append(Sample("/imu/data", at + 0.001, wall + 0.001, orjson.dumps(imu)))
+        out.append(Sample("/odom", wall, orjson.dumps(odom)))
+        out.append(Sample("/imu/data", wall + 0.001, orjson.dumps(imu)))
         if i % 10 == 0:
             battery = {"battery": {"state_of_charge_pct": 80 - i / 100, "voltage_v": 24.1}}
-            out.append(Sample("/battery_state", at + 0.002, wall + 0.002, orjson.dumps(battery)))
+            out.append(Sample("/battery_state", wall + 0.002, orjson.dumps(battery)))
     return out
 
 

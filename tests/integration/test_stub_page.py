@@ -25,8 +25,7 @@ import zstandard
 from phytrace_edge import run_simulation
 from phytrace_edge.builder.envelope import envelope
 from phytrace_edge.config import load_settings
-from phytrace_edge.incident.parts import ClosedIncident, incident_events
-from phytrace_edge.incident.ring import Sample
+from phytrace_edge.incident.parts import ClosedIncident, Sample, incident_events
 from phytrace_edge.incident.triggers import Trigger
 from phytrace_edge.udm.event import new_event_id, parse_timestamp
 
@@ -254,7 +253,6 @@ def crafted_incident(source_id: str, trigger_wall: float) -> list[dict]:
     samples = [
         Sample(
             "/imu/data",
-            100.0 + i * 0.02,
             trigger_wall - 1.0 + i * 0.02 + 0.0007,  # microseconds matter in a 2.5 s window
             orjson.dumps({"imu": {"angular_velocity_dps": {"x": 0.0, "y": 0.0, "z": i % 9}}}),
         )
