@@ -80,8 +80,10 @@ class Appender:
         try:
             return self._insert(rows, unencodable, after_commit, upkeep, now)
         except QueueFullError:
-            if self._caps.limits.makes_room and self._full_disk.evict_oldest(
-                max(len(rows), self._db.counter("depth") // 100), self._clock()
+            if self._caps.limits.makes_room and self._full_disk.make_room(
+                [len(row.body) for row in rows],
+                max(len(rows), self._db.counter("depth") // 100),
+                self._clock(),
             ):
                 with contextlib.suppress(QueueFullError):
                     return self._insert(rows, unencodable, after_commit, upkeep, self._clock())

@@ -35,6 +35,7 @@ from phytrace_edge.queue.storage.database import Database, bump_counters
 log = logging.getLogger(__name__)
 
 REPORT_EVERY_S = 60.0
+EVICT_ROUNDS = 8  # evictions that double each time: up to 255x the first
 
 
 class FullDisk:
@@ -54,15 +55,42 @@ class FullDisk:
         reserve = self._db.reserve
         if reserve is None or reserve.held():
             return False
-        needed = 2 * (sum(sizes) + ROW_OVERHEAD_BYTES * len(sizes))
+        needed = self._needed(sizes)
         volume = self.volume.look()
         if volume is None:
             return False  # unknown (the folder is gone): SQLite says whether they fit
         if volume.free >= 2 * reserve.size + needed:
             self.restore_reserve()  # not a full disk: the reserve comes back now
             return False
-        free_pages = self._db.read("PRAGMA freelist_count")[0][0]
-        return bool(free_pages * self._db.page_size < needed)
+        return self._free_bytes() < needed
+
+    def _needed(self, sizes: list[int]) -> int:
+        """Free bytes in the file that new rows of these sizes need (twice theirs: the
+        WAL's copy of each page, then the page)."""
+        return 2 * (sum(sizes) + ROW_OVERHEAD_BYTES * len(sizes))
+
+    def _free_bytes(self) -> int:
+        """The bytes of the file's free pages."""
+        return int(self._db.read("PRAGMA freelist_count")[0][0]) * self._db.page_size
+
+    def make_room(self, sizes: list[int], count: int, now: float) -> bool:
+        """Evict the oldest events (``evict_oldest``) so that new rows of these sizes
+        can be written; True when they may be tried again. On a volume with no room and
+        the reserve gone, until they fit in the file's free pages (``refuses``), ``count``
+        and then twice as many each round, and nothing at all when even the whole queue
+        would not free enough: old events evicted for new ones that are refused anyway
+        are lost for nothing. Otherwise (SQLite itself found the disk full) ``count``."""
+        if not self.refuses(sizes):
+            return self.evict_oldest(count, now)
+        if self._db.counter("stored_bytes") + self._free_bytes() < self._needed(sizes):
+            return False
+        for _ in range(EVICT_ROUNDS):
+            if not self.evict_oldest(count, now):
+                return False
+            if not self.refuses(sizes):
+                return True
+            count *= 2
+        return False
 
     def restore_reserve(self) -> bool:
         """Make the reserve again when it is missing and the volume has room for it

@@ -2,8 +2,11 @@
 
 With QUEUE_ON_FULL=thin, when a put does not fit under the caps, the queue walks its
 rows from the oldest onward and halves each periodic one it passes: a frame keeps every
-other event, and a single row is kept or deleted by its id, so that after k halvings
-1 in 2^k of the periodic events of that stretch remain, evenly spread. What is kept of
+other event, and of the single rows it passes (a periodic event alone between two
+important ones) every other one, so that after k halvings 1 in 2^k of the periodic
+events of that stretch remain, evenly spread. (Single rows were once kept by their id's
+parity: with an alarm after every periodic event, every periodic id was odd, and one
+walk deleted them all.) What is kept of
 neighbouring rows is packed into frames again (decoded and compressed once), so that
 the pages it frees are whole pages. Important events are never touched, and neither
 are rows a sender holds or rows younger than ``SEAL_AFTER_S`` (the live end).
@@ -15,8 +18,9 @@ the thinnest, and a robot's recent past keeps the finest resolution. Rows at
 drop the oldest periodic events, and important ones only when no periodic ones are
 left (``caps.drop_oldest``).
 
-The walk's place is kept in ``meta`` (``thin_walk``) and each step reads the next rows
-by primary key, so thinning costs what it frees, never a scan of the queue.
+The walk's place is kept in ``meta`` (``thin_walk``: its level, the next row, and
+whether the next single row is kept) and each step reads the next rows by primary key,
+so thinning costs what it frees, never a scan of the queue.
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ def thin_oldest(
     """Halve periodic rows, oldest first, until about ``wanted`` events are gone (or
     nothing is left to thin), packing what is kept into frames of up to
     ``frame_events``; the number of events removed, counted as ``thinned``."""
-    level, next_id = _load_walk(cursor)
+    level, next_id, keep_single = _load_walk(cursor)
     free = leases.free_ranges(cursor, now)
     removed, walks, halved_in_walk = 0, 0, False
     kept: _Kept | None = None
@@ -83,11 +87,11 @@ def thin_oldest(
                 continue
             events = split_frame(codecs.decode(row.codec, row.dict_id, row.body), row.events)
             # a frame keeps every other event, always its newest (so its newest_at, the
-            # TTL's clock, stays exact); a single row, every other id of its level
+            # TTL's clock, stays exact); of the single rows, every other one
             if row.events > 1:
                 halved = events[(row.events - 1) % 2 :: 2]
             else:
-                halved = events[: 1 - (row.id >> row.thin_level) % 2]
+                halved, keep_single = (events if keep_single else []), not keep_single
             if (
                 kept is None
                 or (kept.level, kept.free_range) != (row.thin_level, where)
@@ -113,7 +117,7 @@ def thin_oldest(
         if level >= MAX_THIN_LEVEL - 1 and not halved_in_walk:
             break  # nothing left to thin: stay at the live end, the caps drop instead
         level, next_id, halved_in_walk = min(level + 1, MAX_THIN_LEVEL - 1), 0, False
-    _save_walk(cursor, level, next_id)
+    _save_walk(cursor, level, next_id, keep_single)
     bump_counters(cursor, depth=-removed, **{"drop:thinned": removed})
     return removed
 
@@ -156,15 +160,16 @@ def _write(cursor: sqlite3.Cursor, codecs: Codecs, kept: _Kept | None) -> None:
     bump_counters(cursor, stored_bytes=new_bytes - kept.old_bytes)
 
 
-def _load_walk(cursor: sqlite3.Cursor) -> tuple[int, int]:
+def _load_walk(cursor: sqlite3.Cursor) -> tuple[int, int, bool]:
+    """The walk's level, its next row and whether its next single row is kept (a queue
+    from before that was kept says ``level:next_id``: keep)."""
     row: Any = cursor.execute("SELECT value FROM meta WHERE key = 'thin_walk'").fetchone()
     if row is None:
-        return 0, 0
-    level, next_id = row[0].split(":")
-    return int(level), int(next_id)
+        return 0, 0, True
+    level, next_id, *keep = row[0].split(":")
+    return int(level), int(next_id), keep != ["0"]
 
 
-def _save_walk(cursor: sqlite3.Cursor, level: int, next_id: int) -> None:
-    cursor.execute(
-        "INSERT OR REPLACE INTO meta(key, value) VALUES ('thin_walk', ?)", (f"{level}:{next_id}",)
-    )
+def _save_walk(cursor: sqlite3.Cursor, level: int, next_id: int, keep_single: bool) -> None:
+    walk = f"{level}:{next_id}:{int(keep_single)}"
+    cursor.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('thin_walk', ?)", (walk,))

@@ -20,7 +20,11 @@ FULL_BELOW_BYTES = 64 * 1024
 _CODE_BY_TEXT = {
     "file is not a database": SQLITE_NOTADB,
     "database disk image is malformed": SQLITE_CORRUPT,
+    "malformed database schema": SQLITE_CORRUPT,  # a damaged sqlite_schema
     "database is locked": SQLITE_BUSY,
+    "database table is locked": SQLITE_LOCKED,
+    "database schema is locked": SQLITE_LOCKED,
+    "access permission denied": SQLITE_PERM,
     "database or disk is full": SQLITE_FULL,
     "unable to open database file": SQLITE_CANTOPEN,
     "attempt to write a readonly database": SQLITE_READONLY,
