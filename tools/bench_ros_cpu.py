@@ -16,7 +16,7 @@ sets of the six window topics (``realistic``: odometry 50 Hz, IMU 200 Hz, joint 
 states 500 Hz), each process measured in turn, the rows interleaved, ``--rounds``
 times: the bare rclpy node; ``run --input ros`` with INCIDENT_RECORDING=false (the
 state topics taken at the tick) and =true (the window armed: every message of the
-window topics called back and kept for INCIDENT_BEFORE_S); at the demanding rates also
+window topics taken at the tick and kept for INCIDENT_BEFORE_S); at the demanding rates also
 with a 120 s window, which the 16 MiB byte bound cuts; and, unless ``--no-dds``,
 ``run --input dds`` off and on (run by the robot's Python, which has cyclonedds). For
 each: % of one core, RSS at the end and its peak (VmHWM), what the bridge heard per

@@ -175,7 +175,8 @@ class TopicSubscriber:
     no Python runs for each of their messages. A full-rate one (an incident's window
     topic) keeps up to FULL_RATE_QUEUE_DEPTH messages, and the tick takes them all, in
     order, each with its own reception stamp: rclpy's executor costs ~600 us of CPU a
-    message to call a callback, a take ~30 (docs/benchmarks.md, "Incident window").
+    message to call a callback (a bare node's), where taking it at the tick and
+    handling it costs ~100 in all (docs/benchmarks.md, "Incident window").
     A take that empties a full queue may have lost its oldest: counted in
     ``queue_full`` by topic.
 
