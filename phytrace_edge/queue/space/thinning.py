@@ -18,16 +18,15 @@ the thinnest, and a robot's recent past keeps the finest resolution. Rows at
 drop the oldest periodic events, and important ones only when no periodic ones are
 left (``caps.drop_oldest``).
 
-The walk's place is kept in ``meta`` (``thin_walk``: its level, the next row, and
-whether the next single row is kept) and each step reads the next rows by primary key,
-so thinning costs what it frees, never a scan of the queue.
+The walk's place is kept in ``meta`` (``thin_walk``: its level and the next row;
+``thin_keep_single``: whether the next single row is kept) and each step reads the next
+rows by primary key, so thinning costs what it frees, never a scan of the queue.
 """
 
 from __future__ import annotations
 
 import sqlite3
 from dataclasses import dataclass, field
-from typing import Any
 
 from phytrace_edge.queue.encoding.codecs import Codecs
 from phytrace_edge.queue.encoding.frames import SEAL_AFTER_S, event_id_of, split_frame
@@ -161,15 +160,18 @@ def _write(cursor: sqlite3.Cursor, codecs: Codecs, kept: _Kept | None) -> None:
 
 
 def _load_walk(cursor: sqlite3.Cursor) -> tuple[int, int, bool]:
-    """The walk's level, its next row and whether its next single row is kept (a queue
-    from before that was kept says ``level:next_id``: keep)."""
-    row: Any = cursor.execute("SELECT value FROM meta WHERE key = 'thin_walk'").fetchone()
-    if row is None:
-        return 0, 0, True
-    level, next_id, *keep = row[0].split(":")
-    return int(level), int(next_id), keep != ["0"]
+    """The walk's level, its next row and whether its next single row is kept (under a
+    key of its own, which a version from before it ignores: a queue it wrote says keep)."""
+    rows = dict(cursor.execute("SELECT key, value FROM meta WHERE key LIKE 'thin_%'"))
+    keep_single = rows.get("thin_keep_single") != "0"
+    if "thin_walk" not in rows:
+        return 0, 0, keep_single
+    level, next_id = rows["thin_walk"].split(":")
+    return int(level), int(next_id), keep_single
 
 
 def _save_walk(cursor: sqlite3.Cursor, level: int, next_id: int, keep_single: bool) -> None:
-    walk = f"{level}:{next_id}:{int(keep_single)}"
-    cursor.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('thin_walk', ?)", (walk,))
+    cursor.executemany(
+        "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
+        [("thin_walk", f"{level}:{next_id}"), ("thin_keep_single", str(int(keep_single)))],
+    )
