@@ -26,6 +26,17 @@ class Kept(logging.Handler):
         self.messages.append(record.getMessage())
 
 
+def service_name(node: Any, service: Any) -> str | None:
+    """The service's full name: rclpy says it from Iron on (``service_name``); Humble's
+    ``srv_name`` is the name as given (``~/mark``), so the node's own services say it."""
+    if service is None:
+        return None
+    if name := getattr(service, "service_name", None):
+        return str(name)
+    found = node.get_service_names_and_types_by_node(node.get_name(), node.get_namespace())
+    return next((name for name, _ in found if name.endswith("/mark")), None)
+
+
 def main() -> int:
     if "--mock" in sys.argv:
         from phytrace_edge.sim.mock_ros import as_rclpy
@@ -52,7 +63,7 @@ def main() -> int:
     try:
         seen = {
             "warnings": kept.messages,
-            "mark_service": source.mark_service and source.mark_service.service_name,
+            "mark_service": service_name(source.node, source.mark_service),
             "subscribed": sorted(source.topic_stats()),
         }
     finally:
